@@ -1,1 +1,2 @@
-// placeholder
+#include "lic/Noise.h"
+// Header-only; this file keeps the build list stable and checks the header compiles alone.

@@ -1,1 +1,529 @@
-// placeholder
+#include "vdbexport/VdbIO.h"
+
+#include <lic/Error.h>
+
+#include <openvdb/Exceptions.h>
+#include <openvdb/io/GridDescriptor.h>
+#include <openvdb/tree/LeafManager.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <system_error>
+
+#include <fcntl.h>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+
+namespace vdbexport {
+
+namespace {
+
+std::string quote(const std::string& s) { return "'" + s + "'"; }
+
+std::string cleanMessage(const char* what);
+
+/// Run `fn`, turning any exception other than lic::Error into a lic::InputError that names
+/// the file and what was being done (OpenVDB reports corrupt and truncated files as IoError,
+/// RuntimeError, KeyError, … and sometimes as std::exception).
+template<typename Fn>
+auto guardRead(const std::string& path, const char* what, Fn&& fn) -> decltype(fn())
+{
+    try {
+        return fn();
+    } catch (const lic::Error&) {
+        throw;
+    } catch (const std::exception& e) { // openvdb::Exception is a std::exception
+        throw lic::InputError("cannot read " + quote(path) + " (" + what + "): " + cleanMessage(e.what())
+                              + "; expected an intact OpenVDB .vdb file (corrupt or truncated?)");
+    }
+}
+
+/// Copy name, class, metadata and transform of `src` onto `dst`.
+void copyGridAttributes(const openvdb::GridBase& src, openvdb::GridBase& dst)
+{
+    static_cast<openvdb::MetaMap&>(dst) = static_cast<const openvdb::MetaMap&>(src);
+    dst.setTransform(src.constTransform().copy());
+}
+
+/// A value converted to another value type (double → float, Vec3d → Vec3s, Vec3i → Vec3s).
+/// OpenVDB's value-converting tree constructor refuses Vec3d → Vec3s, so convert by hand.
+template<typename DstV, typename SrcV>
+DstV convertValue(const SrcV& v)
+{
+    if constexpr (openvdb::VecTraits<SrcV>::IsVec) {
+        using E = typename openvdb::VecTraits<DstV>::ElementType;
+        return DstV(static_cast<E>(v[0]), static_cast<E>(v[1]), static_cast<E>(v[2]));
+    } else {
+        return static_cast<DstV>(v);
+    }
+}
+
+/// A copy of `src` with another value type: same topology, every voxel and tile value (active
+/// or not) converted, and the same name, class, metadata and transform.
+template<typename DstGridT, typename SrcGridT>
+typename DstGridT::Ptr convertGrid(const SrcGridT& src)
+{
+    using DstTreeT = typename DstGridT::TreeType;
+    using DstV = typename DstGridT::ValueType;
+    auto tree = std::make_shared<DstTreeT>(src.tree(), convertValue<DstV>(src.background()),
+                                           openvdb::TopologyCopy());
+    // Leaf voxels, in parallel.
+    openvdb::tree::LeafManager<DstTreeT> leaves(*tree);
+    leaves.foreach([&](typename DstTreeT::LeafNodeType& leaf, std::size_t) {
+        const auto* srcLeaf = src.tree().probeConstLeaf(leaf.origin());
+        if (!srcLeaf) return;
+        for (openvdb::Index i = 0; i < DstTreeT::LeafNodeType::SIZE; ++i)
+            leaf.setValueOnly(i, convertValue<DstV>(srcLeaf->getValue(i)));
+    });
+    // Tiles of the root and internal nodes.
+    auto srcAcc = src.getConstAccessor();
+    auto it = tree->beginValueAll();
+    it.setMaxDepth(DstTreeT::RootNodeType::LEVEL - 1);
+    for (; it; ++it) it.setValue(convertValue<DstV>(srcAcc.getValue(it.getCoord())));
+
+    auto dst = DstGridT::create(tree);
+    copyGridAttributes(src, *dst);
+    return dst;
+}
+
+/// Bounds-checked little reader over a file, for checkVdbLayout.
+class LayoutReader
+{
+public:
+    explicit LayoutReader(const std::string& path)
+        : mIn(path, std::ios::binary), mSize(static_cast<uint64_t>(fs::file_size(path)))
+    {}
+    uint64_t size() const { return mSize; }
+    uint64_t pos() const { return mPos; }
+    bool read(void* dst, uint64_t n)
+    {
+        if (n > mSize - mPos) return false;
+        mIn.read(static_cast<char*>(dst), static_cast<std::streamsize>(n));
+        mPos += n;
+        return bool(mIn);
+    }
+    template<typename T> bool read(T& value) { return read(&value, sizeof(T)); }
+    bool skip(uint64_t n)
+    {
+        if (n > mSize - mPos) return false;
+        mIn.seekg(static_cast<std::streamoff>(n), std::ios::cur);
+        mPos += n;
+        return bool(mIn);
+    }
+    bool seek(uint64_t p)
+    {
+        if (p > mSize) return false;
+        mIn.seekg(static_cast<std::streamoff>(p));
+        mPos = p;
+        return bool(mIn);
+    }
+    /// A length-prefixed string, as OpenVDB writes names and type names.
+    bool readString(std::string& s)
+    {
+        uint32_t n = 0;
+        if (!read(n) || n > mSize - mPos) return false;
+        s.resize(n);
+        return read(s.data(), n);
+    }
+
+private:
+    std::ifstream mIn;
+    uint64_t mSize;
+    uint64_t mPos = 0;
+};
+
+/// @brief Check a .vdb file's header and table of grids with bounds-checked reads, before
+///        OpenVDB parses it: OpenVDB reads a grid cut short at the end of the file without
+///        complaint, and trusts string lengths read from a damaged header (allocating gigabytes).
+/// Files this does not understand (other format versions, streamed files without grid offsets)
+/// are left to OpenVDB.
+/// @throw lic::InputError naming `path` if it is not a VDB file or is truncated.
+void checkVdbLayout(const std::string& path)
+{
+    LayoutReader in(path);
+    const auto truncated = [&](const std::string& what) {
+        return lic::InputError(quote(path) + " is truncated or corrupt: " + what + " (the file has "
+                               + std::to_string(in.size()) + " bytes); expected an intact OpenVDB .vdb file");
+    };
+    int64_t magic = 0;
+    const int64_t expectedMagic = openvdb::OPENVDB_MAGIC;
+    if (in.size() < sizeof(magic)) {
+        // A few bytes that begin like a VDB file are a truncated one.
+        std::string head(in.size(), '\0');
+        in.read(head.data(), head.size());
+        if (!head.empty() && std::memcmp(head.data(), &expectedMagic, head.size()) == 0)
+            throw truncated("its header is cut short");
+    }
+    if (!in.read(magic) || magic != expectedMagic)
+        throw lic::InputError(quote(path) + " is not an OpenVDB file (no VDB header); expected a .vdb file");
+    uint32_t fileVersion = 0, libMajor = 0, libMinor = 0;
+    char hasGridOffsets = 0;
+    if (!in.read(fileVersion) || !in.read(libMajor) || !in.read(libMinor) || !in.read(hasGridOffsets))
+        throw truncated("its header is cut short");
+    if (fileVersion < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION
+        || fileVersion > openvdb::OPENVDB_FILE_VERSION)
+        return; // a layout we do not parse: OpenVDB reports what it thinks of it
+    if (!in.skip(36)) throw truncated("its header is cut short"); // UUID
+    int32_t metaCount = 0;
+    if (!in.read(metaCount) || metaCount < 0) throw truncated("its file metadata is cut short");
+    for (int32_t i = 0; i < metaCount; ++i) {
+        std::string name, type;
+        uint32_t bytes = 0;
+        if (!in.readString(name) || !in.readString(type) || !in.read(bytes) || !in.skip(bytes))
+            throw truncated("its file metadata is cut short");
+    }
+    int32_t gridCount = 0;
+    if (!in.read(gridCount) || gridCount < 0) throw truncated("its table of grids is cut short");
+    if (!hasGridOffsets) return; // grids follow inline; OpenVDB reads them all on open
+    for (int32_t i = 0; i < gridCount; ++i) {
+        std::string uniqueName, type, instanceParent;
+        int64_t gridPos = 0, blockPos = 0, endPos = 0;
+        if (!in.readString(uniqueName) || !in.readString(type) || !in.readString(instanceParent)
+            || !in.read(gridPos) || !in.read(blockPos) || !in.read(endPos))
+            throw truncated("the header of grid #" + std::to_string(i + 1) + " is cut short");
+        const std::string name = quote(openvdb::io::GridDescriptor::nameAsString(uniqueName));
+        if (endPos > static_cast<int64_t>(in.size()))
+            throw truncated("grid " + name + " should end at byte " + std::to_string(endPos));
+        if (gridPos < static_cast<int64_t>(in.pos()) || blockPos < gridPos || endPos < blockPos)
+            throw truncated("grid " + name + " has inconsistent offsets");
+        if (!in.seek(static_cast<uint64_t>(endPos)))
+            throw truncated("grid " + name + " should end at byte " + std::to_string(endPos));
+    }
+}
+
+/// An exception message fit to quote: control characters and runs of blanks collapsed (OpenVDB
+/// echoes garbage read from damaged files), at most 200 characters.
+std::string cleanMessage(const char* what)
+{
+    std::string out;
+    for (const char* c = what; *c && out.size() < 200; ++c) {
+        const bool blank = std::isspace(static_cast<unsigned char>(*c)) || std::iscntrl(static_cast<unsigned char>(*c));
+        if (blank && (out.empty() || out.back() == ' ')) continue;
+        out.push_back(blank ? ' ' : *c);
+    }
+    if (out.size() >= 200) out += "...";
+    return out;
+}
+
+openvdb::Vec3SGrid::Ptr toVec3S(const openvdb::GridBase::Ptr& grid)
+{
+    if (auto g = openvdb::gridPtrCast<openvdb::Vec3SGrid>(grid)) return g;
+    if (auto g = openvdb::gridConstPtrCast<openvdb::Vec3DGrid>(grid))
+        return convertGrid<openvdb::Vec3SGrid>(*g);
+    if (auto g = openvdb::gridConstPtrCast<openvdb::Vec3IGrid>(grid))
+        return convertGrid<openvdb::Vec3SGrid>(*g);
+    return nullptr;
+}
+
+openvdb::FloatGrid::Ptr toFloat(const openvdb::GridBase::Ptr& grid)
+{
+    if (auto g = openvdb::gridPtrCast<openvdb::FloatGrid>(grid)) return g;
+    if (auto g = openvdb::gridConstPtrCast<openvdb::DoubleGrid>(grid))
+        return convertGrid<openvdb::FloatGrid>(*g);
+    return nullptr;
+}
+
+/// Check that `path` names a file we may create: its directory exists and is writable, and
+/// `path` itself is not a directory. Returns the temporary name to write first.
+std::string prepareAtomicWrite(const std::string& path)
+{
+    if (path.empty()) throw lic::InputError("cannot write a file with an empty path; expected a file name");
+    const fs::path p(path);
+    fs::path dir = p.parent_path();
+    if (dir.empty()) dir = ".";
+    std::error_code ec;
+    if (!fs::exists(dir, ec))
+        throw lic::InputError("cannot write " + quote(path) + ": directory " + quote(dir.string())
+                              + " does not exist; create it first or choose another output path");
+    if (!fs::is_directory(dir, ec))
+        throw lic::InputError("cannot write " + quote(path) + ": " + quote(dir.string())
+                              + " is not a directory; expected an existing directory");
+    if (::access(dir.c_str(), W_OK) != 0)
+        throw lic::InputError("cannot write " + quote(path) + ": directory " + quote(dir.string())
+                              + " is not writable (" + std::strerror(errno) + ")");
+    if (fs::is_directory(p, ec))
+        throw lic::InputError("cannot write " + quote(path)
+                              + ": it is a directory; expected a file path");
+    return path + ".tmp-" + std::to_string(::getpid());
+}
+
+/// Flush `tmp` to disk, then rename it over `path`. Removes `tmp` and throws lic::Error on failure.
+void commitAtomicWrite(const std::string& tmp, const std::string& path)
+{
+    std::error_code ec;
+    const int fd = ::open(tmp.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0 || ::fsync(fd) != 0) {
+        const std::string reason = std::strerror(errno);
+        if (fd >= 0) ::close(fd);
+        fs::remove(tmp, ec);
+        throw lic::Error("cannot write " + quote(path) + ": flushing " + quote(tmp) + " failed ("
+                         + reason + ")");
+    }
+    ::close(fd);
+    fs::rename(tmp, path, ec);
+    if (ec) {
+        const std::string reason = ec.message();
+        fs::remove(tmp, ec);
+        throw lic::Error("cannot write " + quote(path) + ": renaming " + quote(tmp) + " failed ("
+                         + reason + ")");
+    }
+}
+
+/// The grid types whose tiles writeVdbAtomic voxelizes (point grids are left alone).
+using VoxelizableGridTypes = openvdb::NumericGridTypes::Append<openvdb::Vec3GridTypes>::Append<
+    openvdb::BoolGrid, openvdb::MaskGrid>;
+
+} // namespace
+
+// ------------------------------------------------------------------------------------------
+// detail
+
+namespace detail {
+
+VdbReader::VdbReader(std::string path) : mPath(std::move(path))
+{
+    openvdb::initialize();
+    if (mPath.empty()) throw lic::InputError("no .vdb file given; expected a path to a .vdb file");
+    std::error_code ec;
+    const fs::path p(mPath);
+    const auto status = fs::status(p, ec);
+    if (!fs::exists(status))
+        throw lic::InputError("file " + quote(mPath) + " not found; expected a .vdb file");
+    if (fs::is_directory(status))
+        throw lic::InputError(quote(mPath) + " is a directory; expected a .vdb file");
+    const auto size = fs::file_size(p, ec);
+    if (!ec && size == 0)
+        throw lic::InputError("file " + quote(mPath) + " is empty (0 bytes); expected a .vdb file");
+    if (!std::ifstream(mPath, std::ios::binary))
+        throw lic::InputError("cannot open " + quote(mPath) + " for reading (" + std::strerror(errno)
+                              + "); expected a readable .vdb file");
+    try {
+        checkVdbLayout(mPath);
+    } catch (const lic::Error&) {
+        throw;
+    } catch (const std::exception& e) {
+        throw lic::InputError("cannot read " + quote(mPath) + ": " + cleanMessage(e.what()));
+    }
+    mFile = std::make_unique<openvdb::io::File>(mPath);
+    try {
+        mFile->open(/*delayLoad=*/false);
+    } catch (const std::exception& e) {
+        const std::string msg = cleanMessage(e.what());
+        if (msg.find("not a VDB file") != std::string::npos)
+            throw lic::InputError(quote(mPath) + " is not an OpenVDB file (no VDB header); "
+                                  "expected a .vdb file");
+        throw lic::InputError("cannot open " + quote(mPath) + " as a .vdb file: " + msg
+                              + "; expected an intact OpenVDB .vdb file (corrupt or truncated?)");
+    }
+}
+
+VdbReader::~VdbReader()
+{
+    try {
+        if (mFile && mFile->isOpen()) mFile->close();
+    } catch (...) {
+    }
+}
+
+std::vector<std::pair<std::string, std::string>> VdbReader::gridTypes()
+{
+    return guardRead(mPath, "reading grid headers", [&] {
+        std::vector<std::pair<std::string, std::string>> out;
+        const auto grids = mFile->readAllGridMetadata();
+        for (const auto& g : *grids) out.emplace_back(g->getName(), g->valueType());
+        return out;
+    });
+}
+
+openvdb::GridBase::Ptr VdbReader::readGrid(const std::string& name)
+{
+    const std::string what = "reading grid " + quote(name);
+    return guardRead(mPath, what.c_str(), [&] {
+        if (!mFile->hasGrid(name))
+            throw lic::InputError("grid " + quote(name) + " not found in " + quote(mPath)
+                                  + "; the file has: " + listGrids(gridTypes()));
+        auto grid = mFile->readGrid(name);
+        if (!grid) throw lic::InputError("grid " + quote(name) + " in " + quote(mPath) + " could not be read");
+        return grid;
+    });
+}
+
+openvdb::GridPtrVec VdbReader::readAllGrids()
+{
+    return guardRead(mPath, "reading grids", [&] {
+        const auto grids = mFile->getGrids();
+        return grids ? *grids : openvdb::GridPtrVec{};
+    });
+}
+
+openvdb::MetaMap::Ptr VdbReader::fileMetadata()
+{
+    return guardRead(mPath, "reading file metadata", [&] {
+        auto meta = mFile->getMetadata();
+        return meta ? meta : std::make_shared<openvdb::MetaMap>();
+    });
+}
+
+std::string listGrids(const std::vector<std::pair<std::string, std::string>>& grids)
+{
+    if (grids.empty()) return "no grids";
+    std::string s;
+    for (const auto& [name, type] : grids) {
+        if (!s.empty()) s += ", ";
+        s += (name.empty() ? std::string("(unnamed)") : name) + " (" + type + ")";
+    }
+    return s;
+}
+
+bool isVec3Type(const std::string& valueType)
+{
+    return valueType == openvdb::typeNameAsString<openvdb::Vec3s>()
+        || valueType == openvdb::typeNameAsString<openvdb::Vec3d>()
+        || valueType == openvdb::typeNameAsString<openvdb::Vec3i>();
+}
+
+} // namespace detail
+
+// ------------------------------------------------------------------------------------------
+// reading
+
+openvdb::Vec3SGrid::Ptr readVelocityGrid(const std::string& path, const std::string& name,
+                                         std::string* chosenName)
+{
+    detail::VdbReader reader(path);
+    const auto grids = reader.gridTypes();
+    const auto find = [&](const std::string& n) {
+        return std::find_if(grids.begin(), grids.end(), [&](const auto& g) { return g.first == n; });
+    };
+
+    std::string chosen;
+    if (!name.empty()) {
+        const auto it = find(name);
+        if (it == grids.end())
+            throw lic::InputError("grid " + quote(name) + " not found in " + quote(path)
+                                  + "; the file has: " + detail::listGrids(grids));
+        if (!detail::isVec3Type(it->second))
+            throw lic::InputError("grid " + quote(name) + " in " + quote(path) + " is a " + it->second
+                                  + " grid; a " + it->second + " grid cannot be a velocity field "
+                                  "(expected a Vec3 grid: vec3s, vec3d or vec3i)");
+        chosen = name;
+    } else {
+        for (const char* candidate : kDefaultVelocityNames) {
+            const auto it = find(candidate);
+            if (it != grids.end() && detail::isVec3Type(it->second)) {
+                chosen = candidate;
+                break;
+            }
+        }
+        if (chosen.empty()) {
+            std::vector<std::pair<std::string, std::string>> vec3;
+            for (const auto& g : grids)
+                if (detail::isVec3Type(g.second)) vec3.push_back(g);
+            if (vec3.empty())
+                throw lic::InputError(quote(path) + " has no Vec3 grid to use as a velocity field; "
+                                      "the file has: " + detail::listGrids(grids)
+                                      + "; expected a vec3s, vec3d or vec3i grid");
+            if (vec3.size() > 1)
+                throw lic::InputError(quote(path) + " has several Vec3 grids and none is named "
+                                      "'velocity', 'vel' or 'v': " + detail::listGrids(vec3)
+                                      + "; pass --grid NAME to choose one");
+            chosen = vec3.front().first;
+        }
+    }
+
+    auto grid = toVec3S(reader.readGrid(chosen));
+    if (!grid)
+        throw lic::InputError("grid " + quote(chosen) + " in " + quote(path)
+                              + " could not be read as a Vec3 grid");
+    if (chosenName) *chosenName = chosen;
+    return grid;
+}
+
+std::map<std::string, openvdb::FloatGrid::Ptr> readScalarGrids(const std::string& path)
+{
+    detail::VdbReader reader(path);
+    std::map<std::string, openvdb::FloatGrid::Ptr> out;
+    for (const auto& [name, type] : reader.gridTypes()) {
+        if (type != openvdb::typeNameAsString<float>() && type != openvdb::typeNameAsString<double>())
+            continue;
+        if (out.count(name)) continue; // duplicate name: the first one wins, as in readGrid
+        if (auto grid = toFloat(reader.readGrid(name))) out.emplace(name, std::move(grid));
+    }
+    return out;
+}
+
+// ------------------------------------------------------------------------------------------
+// writing
+
+void writeVdbAtomic(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)
+{
+    openvdb::initialize();
+    const std::string tmp = prepareAtomicWrite(path);
+    std::error_code ec;
+    try {
+        for (std::size_t i = 0; i < grids.size(); ++i) {
+            if (!grids[i])
+                throw lic::Error("cannot write " + quote(path) + ": grid #" + std::to_string(i)
+                                 + " is null; expected a grid");
+            if (grids[i]->baseTree().activeTileCount() == 0) continue;
+            // Voxelize a copy: the caller's grid keeps its (cheaper) tiles.
+            auto copy = grids[i]->deepCopyGrid();
+            copy->apply<VoxelizableGridTypes>([](auto& grid) { grid.tree().voxelizeActiveTiles(); });
+            grids[i] = copy;
+        }
+        {
+            openvdb::io::File file(tmp);
+            file.write(grids, fileMetadata);
+            file.close();
+        }
+        // io::File does not report stream errors after opening (e.g. a full disk): check the
+        // layout of what was written and read the headers back.
+        try {
+            checkVdbLayout(tmp);
+        } catch (const lic::InputError& e) {
+            throw lic::Error("cannot write " + quote(path) + ": the file written is incomplete (disk full?): "
+                             + e.what());
+        }
+        openvdb::io::File check(tmp);
+        check.open(/*delayLoad=*/false);
+        const auto written = check.readAllGridMetadata();
+        check.close();
+        if (!written || written->size() != grids.size())
+            throw lic::Error("cannot write " + quote(path) + ": only "
+                             + std::to_string(written ? written->size() : 0) + " of "
+                             + std::to_string(grids.size()) + " grids could be read back");
+    } catch (const lic::Error&) {
+        fs::remove(tmp, ec);
+        throw;
+    } catch (const std::exception& e) {
+        fs::remove(tmp, ec);
+        throw lic::Error("cannot write " + quote(path) + " (via " + quote(tmp) + "): " + e.what());
+    }
+    commitAtomicWrite(tmp, path);
+}
+
+void writeTextAtomic(const std::string& path, const std::string& text)
+{
+    const std::string tmp = prepareAtomicWrite(path);
+    std::error_code ec;
+    {
+        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+        if (out) out.write(text.data(), static_cast<std::streamsize>(text.size()));
+        if (out) out.flush();
+        if (!out) {
+            const std::string reason = std::strerror(errno);
+            out.close();
+            fs::remove(tmp, ec);
+            throw lic::Error("cannot write " + quote(path) + ": writing " + quote(tmp) + " failed ("
+                             + reason + ")");
+        }
+    }
+    commitAtomicWrite(tmp, path);
+}
+
+} // namespace vdbexport

@@ -1,0 +1,121 @@
+// A world-space velocity field on an OpenVDB Vec3 grid, with fast trilinear sampling.
+#pragma once
+
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/Dense.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <memory>
+#include <vector>
+
+namespace lic {
+
+/// An affine index↔world map, extracted once from a linear openvdb::math::Transform so the
+/// integrator's inner loop does not go through the transform's virtual map.
+struct AffineMap
+{
+    openvdb::Mat4d indexToWorld;
+    openvdb::Mat4d worldToIndex;
+
+    AffineMap() = default;
+    /// @throw lic::InputError if the transform is not linear (e.g. a frustum map).
+    explicit AffineMap(const openvdb::math::Transform& xform);
+
+    openvdb::Vec3d toIndex(const openvdb::Vec3d& w) const { return worldToIndex.transformH(w); }
+    openvdb::Vec3d toWorld(const openvdb::Vec3d& i) const { return indexToWorld.transformH(i); }
+};
+
+/// The velocity field of a bake: a Vec3 grid whose values are world-space vectors, placed in the
+/// world by the grid's transform.
+///
+/// The domain is the extent of the grid's active voxels: a point is inside when its index-space
+/// position lies within [min − 0.5, max + 0.5] of the active bounding box on every axis. Inside
+/// the domain the field is interpolated trilinearly (cell-centred grids) or per face component
+/// (staggered grids, GRID_STAGGERED); in the outermost half voxel the nearest voxel centre's
+/// values are used. Inactive voxels inside the bounding box hold the background (normally zero),
+/// so streamlines stop there.
+class VelocityField
+{
+public:
+    using Ptr = std::shared_ptr<const VelocityField>;
+
+    /// @param grid the field; values are world-space vectors.
+    /// @throw lic::InputError if the grid has no active voxels, a non-linear transform, NaN or
+    ///        infinite values (the message counts them and names the first voxel), or is zero
+    ///        everywhere.
+    explicit VelocityField(openvdb::Vec3SGrid::ConstPtr grid);
+
+    const openvdb::Vec3SGrid& grid() const { return *mGrid; }
+    const openvdb::math::Transform& transform() const { return mGrid->transform(); }
+    const AffineMap& map() const { return mMap; }
+    bool isStaggered() const { return mStaggered; }
+
+    /// Bounding box of the active voxels, index space, inclusive.
+    const openvdb::CoordBBox& indexBBox() const { return mBBox; }
+    /// World-space bounds of the active voxels' extents (index bbox ± half a voxel, mapped).
+    openvdb::BBoxd worldBBox() const;
+    /// Edge lengths of one voxel in world units.
+    openvdb::Vec3d voxelSize() const { return mGrid->voxelSize(); }
+    /// Largest speed |v| over active voxels (world units per time).
+    double maxSpeed() const { return mMaxSpeed; }
+    /// Number of active voxels.
+    openvdb::Index64 activeVoxelCount() const { return mActiveVoxels; }
+
+    /// True if a world position lies inside the domain (see class comment).
+    bool contains(const openvdb::Vec3d& world) const { return containsIndex(mMap.toIndex(world)); }
+    bool containsIndex(const openvdb::Vec3d& idx) const
+    {
+        return idx[0] >= mLo[0] && idx[1] >= mLo[1] && idx[2] >= mLo[2] && idx[0] <= mHi[0] &&
+               idx[1] <= mHi[1] && idx[2] <= mHi[2];
+    }
+
+    /// Velocity (world units) at a world position. Returns false, leaving `v` untouched, when the
+    /// position is outside the domain. Thread-safe; no allocation.
+    bool sample(const openvdb::Vec3d& world, openvdb::Vec3d& v) const
+    {
+        const openvdb::Vec3d idx = mMap.toIndex(world);
+        if (!containsIndex(idx)) return false;
+        v = mStaggered ? sampleStaggered(idx) : sampleCentred(idx);
+        return true;
+    }
+
+    /// Velocity and its world-space Jacobian dv[a][b] = ∂v_a/∂x_b (the derivative of the
+    /// trilinear interpolant) at a world position. False outside the domain.
+    bool sampleGradient(const openvdb::Vec3d& world, openvdb::Vec3d& v, openvdb::Mat3d& dv) const;
+
+    /// Trilinear velocity at an index-space position (clamped to the active bounding box).
+    openvdb::Vec3d sampleIndex(const openvdb::Vec3d& idx) const
+    {
+        return mStaggered ? sampleStaggered(idx) : sampleCentred(idx);
+    }
+
+private:
+    openvdb::Vec3d sampleCentred(const openvdb::Vec3d& idx) const;
+    openvdb::Vec3d sampleStaggered(const openvdb::Vec3d& idx) const;
+    /// Value at integer coordinate, clamped to the bounding box.
+    const openvdb::Vec3s& at(int i, int j, int k) const
+    {
+        i = std::clamp(i, mBBox.min()[0], mBBox.max()[0]) - mBBox.min()[0];
+        j = std::clamp(j, mBBox.min()[1], mBBox.max()[1]) - mBBox.min()[1];
+        k = std::clamp(k, mBBox.min()[2], mBBox.max()[2]) - mBBox.min()[2];
+        return mData[(size_t(i) * mDim[1] + size_t(j)) * mDim[2] + size_t(k)];
+    }
+
+    openvdb::Vec3SGrid::ConstPtr mGrid;
+    AffineMap mMap;
+    openvdb::Mat3d mIndexPerWorld; // linear part of world→index, for chain-rule derivatives
+    bool mStaggered = false;
+    openvdb::CoordBBox mBBox;
+    openvdb::Vec3d mLo, mHi;
+    std::array<size_t, 3> mDim{};
+    // Dense copy of the active bbox (z fastest): the sampling fast path, ~5x faster than
+    // a ValueAccessor + BoxSampler in the integrator loop.
+    std::unique_ptr<openvdb::tools::Dense<openvdb::Vec3s, openvdb::tools::LayoutZYX>> mDense;
+    const openvdb::Vec3s* mData = nullptr;
+    double mMaxSpeed = 0;
+    openvdb::Index64 mActiveVoxels = 0;
+};
+
+} // namespace lic
