@@ -1,1 +1,736 @@
+// End-to-end tests of the `licvdb` command line: each test runs the built binary (LICVDB_EXE)
+// in a fresh temporary directory, captures stdout, stderr and the exit status, and inspects the
+// files it wrote with OpenVDB and vdbexport::describeVdb. Inputs are tiny (12³–16³ fields,
+// short kernels) so the suite runs in seconds.
 #include <gtest/gtest.h>
+
+#include "vdbexport/Info.h"
+#include "vdbexport/VdbIO.h"
+
+#include <nlohmann/json.hpp>
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cctype>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iostream>
+#include <limits>
+#include <map>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+// ---- running the binary ---------------------------------------------------------------------
+
+struct RunResult
+{
+    int code = -1; ///< exit status; 128 + signal if killed by a signal; -1 if it could not run
+    std::string out;
+    std::string err;
+    std::string command;
+
+    /// For assertion messages.
+    std::string describe() const
+    {
+        return "command: " + command + "\nexit: " + std::to_string(code) + "\n--- stdout ---\n" + out +
+               "\n--- stderr ---\n" + err + "\n";
+    }
+};
+
+std::string shellQuote(const std::string& s)
+{
+    std::string q = "'";
+    for (char c : s) {
+        if (c == '\'') q += "'\\''";
+        else q += c;
+    }
+    return q + "'";
+}
+
+std::string readText(const fs::path& p)
+{
+    std::ifstream in(p, std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+}
+
+void writeText(const fs::path& p, const std::string& text)
+{
+    std::ofstream out(p, std::ios::binary);
+    out << text;
+    ASSERT_TRUE(out.good()) << "cannot write " << p;
+}
+
+std::string lower(std::string s)
+{
+    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return s;
+}
+
+/// Every active voxel value of a float grid must be finite and in [0, 1].
+void expectUnitRange(const openvdb::FloatGrid& grid)
+{
+    std::size_t bad = 0;
+    float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+    for (auto it = grid.cbeginValueOn(); it; ++it) {
+        const float v = *it;
+        if (!(v >= 0.0f && v <= 1.0f)) ++bad;
+        lo = std::min(lo, v);
+        hi = std::max(hi, v);
+    }
+    EXPECT_EQ(bad, 0u) << "grid " << grid.getName() << ": values outside [0,1]; range [" << lo << ", " << hi << "]";
+}
+
+/// World box of a grid's active voxels: index bbox min − ½ … max + ½ through the transform
+/// (computed here independently of describeVdb and the bake).
+openvdb::BBoxd worldBBox(const openvdb::GridBase& grid)
+{
+    const openvdb::CoordBBox ib = grid.evalActiveVoxelBoundingBox();
+    openvdb::BBoxd out;
+    for (int c = 0; c < 8; ++c) {
+        const openvdb::Vec3d corner((c & 1) ? ib.max()[0] + 0.5 : ib.min()[0] - 0.5,
+                                    (c & 2) ? ib.max()[1] + 0.5 : ib.min()[1] - 0.5,
+                                    (c & 4) ? ib.max()[2] + 0.5 : ib.min()[2] - 0.5);
+        out.expand(grid.transform().indexToWorld(corner));
+    }
+    return out;
+}
+
+void expectBBoxNear(const openvdb::BBoxd& a, const openvdb::BBoxd& b, double tol, const std::string& what)
+{
+    for (int i = 0; i < 3; ++i) {
+        EXPECT_NEAR(a.min()[i], b.min()[i], tol) << what << ": min[" << i << "]";
+        EXPECT_NEAR(a.max()[i], b.max()[i], tol) << what << ": max[" << i << "]";
+    }
+}
+
+openvdb::BBoxd bboxFromJson(const json& j)
+{
+    return openvdb::BBoxd(openvdb::Vec3d(j.at(0).at(0).get<double>(), j.at(0).at(1).get<double>(),
+                                         j.at(0).at(2).get<double>()),
+                          openvdb::Vec3d(j.at(1).at(0).get<double>(), j.at(1).at(1).get<double>(),
+                                         j.at(1).at(2).get<double>()));
+}
+
+/// All grids of a .vdb file by name (read with plain OpenVDB, not vdbexport).
+std::map<std::string, openvdb::GridBase::Ptr> readAll(const fs::path& p)
+{
+    std::map<std::string, openvdb::GridBase::Ptr> out;
+    openvdb::io::File file(p.string());
+    file.open(/*delayLoad=*/false);
+    for (auto it = file.beginName(); it != file.endName(); ++it) out[it.gridName()] = file.readGrid(it.gridName());
+    file.close();
+    return out;
+}
+
+openvdb::FloatGrid::Ptr readFloat(const fs::path& p, const std::string& name)
+{
+    auto grids = readAll(p);
+    auto it = grids.find(name);
+    if (it == grids.end()) return nullptr;
+    return openvdb::GridBase::grid<openvdb::FloatGrid>(it->second);
+}
+
+/// Each test gets its own directory: `work` for inputs and outputs, `logs` for captured streams
+/// (kept apart so "no output file was created" checks only see what licvdb wrote).
+class CliTest : public ::testing::Test
+{
+protected:
+    void SetUp() override
+    {
+        openvdb::initialize();
+        static std::atomic<int> counter{0};
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        std::string name = info->name();
+        for (char& c : name)
+            if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+        mRoot = fs::temp_directory_path() /
+                ("licvdb_test_cli_" + std::to_string(::getpid()) + "_" + std::to_string(counter++) + "_" + name);
+        fs::remove_all(mRoot);
+        fs::create_directories(mRoot / "work");
+        fs::create_directories(mRoot / "logs");
+    }
+    void TearDown() override
+    {
+        std::error_code ec;
+        if (!HasFailure()) fs::remove_all(mRoot, ec);
+        else std::cerr << "kept test directory " << mRoot << "\n";
+    }
+
+    fs::path work(const std::string& name = "") const { return name.empty() ? mRoot / "work" : mRoot / "work" / name; }
+
+    /// Run licvdb with `args`; stdin is /dev/null, stdout and stderr are captured.
+    RunResult run(const std::vector<std::string>& args)
+    {
+        const int n = mRuns++;
+        const fs::path outFile = mRoot / "logs" / ("stdout." + std::to_string(n));
+        const fs::path errFile = mRoot / "logs" / ("stderr." + std::to_string(n));
+        RunResult r;
+        r.command = shellQuote(LICVDB_EXE);
+        for (const auto& a : args) {
+            r.command += ' ';
+            r.command += shellQuote(a);
+        }
+        std::string cmd = "cd ";
+        cmd += shellQuote(work().string());
+        cmd += " && ";
+        cmd += r.command;
+        cmd += " </dev/null >";
+        cmd += shellQuote(outFile.string());
+        cmd += " 2>";
+        cmd += shellQuote(errFile.string());
+        const int status = std::system(cmd.c_str());
+        if (status == -1) r.code = -1;
+        else if (WIFEXITED(status)) r.code = WEXITSTATUS(status);
+        else if (WIFSIGNALED(status)) r.code = 128 + WTERMSIG(status);
+        r.out = readText(outFile);
+        r.err = readText(errFile);
+        return r;
+    }
+
+    /// `licvdb field PRESET --res RES --out NAME` into the work directory; returns the path.
+    fs::path makeField(const std::string& name, const std::string& preset = "abc", const std::string& res = "12,12,12")
+    {
+        const fs::path p = work(name);
+        const RunResult r = run({"field", preset, "--res", res, "--out", p.string(), "--quiet"});
+        EXPECT_EQ(r.code, 0) << r.describe();
+        EXPECT_TRUE(fs::is_regular_file(p)) << r.describe();
+        return p;
+    }
+
+    /// A small, fast bake of `field` into `out`; `extra` flags are appended.
+    RunResult bake(const fs::path& field, const fs::path& out, const std::vector<std::string>& extra = {})
+    {
+        std::vector<std::string> args{"bake", "--field", field.string(), "--out", out.string(),
+                                      "--length", "4", "--step", "0.5", "--upsample", "2"};
+        args.insert(args.end(), extra.begin(), extra.end());
+        return run(args);
+    }
+
+    /// Names of the regular files in the work directory (recursively, relative).
+    std::set<std::string> workFiles() const
+    {
+        std::set<std::string> out;
+        for (const auto& e : fs::recursive_directory_iterator(work()))
+            if (!e.is_directory()) out.insert(fs::relative(e.path(), work()).string());
+        return out;
+    }
+
+    fs::path mRoot;
+    int mRuns = 0;
+};
+
+// ---- 1. field → bake → info ------------------------------------------------------------------
+
+TEST_F(CliTest, FieldBakeHappyPath)
+{
+    const fs::path field = makeField("abc.vdb");
+    const fs::path out = work("abc_lic.vdb");
+    const RunResult r = bake(field, out);
+    ASSERT_EQ(r.code, 0) << r.describe();
+    ASSERT_TRUE(fs::is_regular_file(out)) << r.describe();
+
+    // The field as written (dense 12³).
+    auto fieldGrid = vdbexport::readVelocityGrid(field.string());
+    ASSERT_TRUE(fieldGrid);
+    EXPECT_EQ(fieldGrid->activeVoxelCount(), openvdb::Index64(12 * 12 * 12));
+
+    auto grids = readAll(out);
+    ASSERT_TRUE(grids.count("density")) << "grids in output: " << grids.size();
+    auto density = openvdb::GridBase::grid<openvdb::FloatGrid>(grids["density"]);
+    ASSERT_TRUE(density) << "density is a " << grids["density"]->valueType() << " grid, expected float";
+    EXPECT_EQ(density->getGridClass(), openvdb::GRID_FOG_VOLUME);
+    expectUnitRange(*density);
+
+    // Dense preset: every output voxel active, as leaf voxels (no tiles).
+    const openvdb::Index64 n = 12 * 2;
+    EXPECT_EQ(density->activeVoxelCount(), n * n * n);
+    EXPECT_EQ(density->tree().activeTileCount(), openvdb::Index64(0));
+
+    // Values are not constant (an actual convolution happened).
+    float lo = 1, hi = 0;
+    for (auto it = density->cbeginValueOn(); it; ++it) {
+        lo = std::min(lo, *it);
+        hi = std::max(hi, *it);
+    }
+    EXPECT_GT(hi - lo, 0.1f);
+
+    // Transform: field voxel size / upsample; same world box as the field (half-voxel alignment).
+    const openvdb::Vec3d fvs = fieldGrid->voxelSize(), ovs = density->voxelSize();
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(ovs[i], fvs[i] / 2.0, 1e-9 * fvs[i]) << "axis " << i;
+    const openvdb::BBoxd fieldBox = worldBBox(*fieldGrid), outBox = worldBBox(*density);
+    expectBBoxNear(outBox, fieldBox, 1e-6, "output world bbox vs field world bbox");
+
+    // Metadata on density.
+    EXPECT_EQ(density->metaValue<std::string>("licvdb_version"), std::string(LICVDB_VERSION));
+    const json recipe = json::parse(density->metaValue<std::string>("licvdb_recipe"));
+    ASSERT_TRUE(recipe.is_object());
+    EXPECT_DOUBLE_EQ(recipe.at("lic").at("length").get<double>(), 4.0);
+    EXPECT_DOUBLE_EQ(recipe.at("lic").at("step").get<double>(), 0.5);
+    EXPECT_EQ(recipe.at("output").at("upsample").get<int>(), 2);
+    EXPECT_EQ(density->metaValue<std::string>("lic_engine"), "fast");
+    EXPECT_EQ(density->metaValue<std::string>("lic_kernel"), "box");
+    EXPECT_FLOAT_EQ(density->metaValue<float>("lic_length"), 4.0f);
+    EXPECT_FLOAT_EQ(density->metaValue<float>("lic_step"), 0.5f);
+    EXPECT_EQ(density->metaValue<openvdb::Int32>("lic_frames"), 1);
+    EXPECT_EQ(density->metaValue<openvdb::Int32>("lic_frame"), 1);
+    EXPECT_EQ(density->metaValue<bool>("lic_cyclic"), false);
+
+    // describeVdb (the `licvdb info` model) agrees.
+    const json d = vdbexport::describeVdb(out.string());
+    const json* dd = nullptr;
+    for (const auto& g : d.at("grids"))
+        if (g.at("name") == "density") dd = &g;
+    ASSERT_NE(dd, nullptr) << d.dump(2);
+    EXPECT_EQ(dd->at("class"), "fog volume");
+    EXPECT_EQ(dd->at("value_type"), "float");
+    EXPECT_EQ(dd->at("active_tiles").get<std::uint64_t>(), 0u);
+    expectBBoxNear(bboxFromJson(dd->at("world_bbox")), fieldBox, 1e-6, "describeVdb world_bbox");
+
+    // Sidecar manifest.
+    const fs::path manifestPath = work("abc_lic.json");
+    ASSERT_TRUE(fs::is_regular_file(manifestPath)) << "no sidecar manifest " << manifestPath;
+    const json manifest = json::parse(readText(manifestPath));
+    ASSERT_TRUE(manifest.contains("grids")) << manifest.dump(2);
+    const json* mg = nullptr;
+    for (const auto& g : manifest.at("grids"))
+        if (g.value("name", "") == "density") mg = &g;
+    ASSERT_NE(mg, nullptr) << manifest.dump(2);
+    ASSERT_TRUE(mg->contains("world_bbox")) << mg->dump();
+    expectBBoxNear(bboxFromJson(mg->at("world_bbox")), fieldBox, 1e-6, "manifest world_bbox");
+    EXPECT_DOUBLE_EQ(manifest.at("recipe").at("lic").at("length").get<double>(), 4.0);
+
+    // No temporary files left behind.
+    for (const auto& f : workFiles()) EXPECT_EQ(f.find(".tmp-"), std::string::npos) << "left over: " << f;
+    EXPECT_EQ(workFiles(), (std::set<std::string>{"abc.vdb", "abc_lic.vdb", "abc_lic.json"}));
+}
+
+// ---- 2. --json and --quiet -------------------------------------------------------------------
+
+TEST_F(CliTest, JsonSummaryAndQuiet)
+{
+    const fs::path field = makeField("abc.vdb");
+
+    const RunResult j = bake(field, work("a.vdb"), {"--json"});
+    ASSERT_EQ(j.code, 0) << j.describe();
+    json s;
+    ASSERT_NO_THROW(s = json::parse(j.out)) << "stdout is not JSON:\n" << j.describe();
+    ASSERT_TRUE(s.is_object()) << j.out;
+    ASSERT_TRUE(s.contains("output_voxels")) << j.out;
+    EXPECT_EQ(s.at("output_voxels").get<std::uint64_t>(), 24u * 24u * 24u);
+    ASSERT_TRUE(s.contains("streamlines")) << j.out;
+    EXPECT_GT(s.at("streamlines").get<double>(), 0);
+    ASSERT_TRUE(s.contains("samples_per_voxel")) << j.out;
+    EXPECT_GT(s.at("samples_per_voxel").get<double>(), 0);
+    ASSERT_TRUE(s.contains("seconds") && s.at("seconds").contains("total")) << j.out;
+    EXPECT_TRUE(s.at("seconds").at("total").is_number()) << j.out;
+    EXPECT_GE(s.at("seconds").at("total").get<double>(), 0.0);
+
+    // Without --quiet a message goes to stderr (so the --quiet check below means something).
+    const RunResult loud = bake(field, work("b.vdb"));
+    ASSERT_EQ(loud.code, 0) << loud.describe();
+    EXPECT_FALSE(loud.err.empty()) << loud.describe();
+
+    const RunResult q = bake(field, work("c.vdb"), {"--quiet"});
+    ASSERT_EQ(q.code, 0) << q.describe();
+    EXPECT_EQ(q.err, "") << q.describe();
+    EXPECT_TRUE(fs::is_regular_file(work("c.vdb")));
+
+    // --quiet also on `field`.
+    const RunResult qf = run({"field", "abc", "--res", "8", "--out", work("f.vdb").string(), "--quiet"});
+    ASSERT_EQ(qf.code, 0) << qf.describe();
+    EXPECT_EQ(qf.err, "") << qf.describe();
+}
+
+// ---- 3. --write-input ------------------------------------------------------------------------
+
+TEST_F(CliTest, WriteInputAddsInputGrid)
+{
+    const fs::path field = makeField("abc.vdb");
+    const fs::path out = work("lic.vdb");
+    const RunResult r = bake(field, out, {"--write-input", "--quiet"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+
+    auto input = readFloat(out, "input");
+    ASSERT_TRUE(input) << "no float grid `input` in " << out;
+    auto density = readFloat(out, "density");
+    ASSERT_TRUE(density);
+    EXPECT_EQ(input->activeVoxelCount(), density->activeVoxelCount());
+    EXPECT_TRUE(input->tree().hasSameTopology(density->tree()));
+    expectUnitRange(*input);
+    float lo = 1, hi = 0;
+    for (auto it = input->cbeginValueOn(); it; ++it) {
+        lo = std::min(lo, *it);
+        hi = std::max(hi, *it);
+    }
+    EXPECT_GT(hi - lo, 0.1f) << "input texture looks constant";
+
+    // Without the flag there is no `input` grid.
+    const fs::path out2 = work("lic2.vdb");
+    ASSERT_EQ(bake(field, out2, {"--quiet"}).code, 0);
+    EXPECT_FALSE(readFloat(out2, "input"));
+}
+
+// ---- 4. recipe and flag precedence -----------------------------------------------------------
+
+TEST_F(CliTest, RecipeSetsLengthAndFlagOverrides)
+{
+    const fs::path field = makeField("abc.vdb");
+    const fs::path recipe = work("r.json");
+    const fs::path outR = work("from_recipe.vdb");
+    writeText(recipe, json{{"field", {{"path", field.string()}}},
+                           {"output", {{"path", outR.string()}, {"upsample", 1}}},
+                           {"lic", {{"length", 3}, {"step", 0.5}}}}
+                          .dump(2));
+
+    // Paths and length from the recipe alone.
+    const RunResult a = run({"bake", "--recipe", recipe.string(), "--quiet"});
+    ASSERT_EQ(a.code, 0) << a.describe();
+    auto dA = readFloat(outR, "density");
+    ASSERT_TRUE(dA);
+    EXPECT_FLOAT_EQ(dA->metaValue<float>("lic_length"), 3.0f);
+    EXPECT_EQ(dA->activeVoxelCount(), openvdb::Index64(12 * 12 * 12)); // recipe's upsample 1
+
+    // A flag overrides the recipe's length (and --out its path); the rest of the recipe stays.
+    const fs::path outF = work("flag.vdb");
+    const RunResult b = run({"bake", "--recipe", recipe.string(), "--length", "5", "--out", outF.string(), "--quiet"});
+    ASSERT_EQ(b.code, 0) << b.describe();
+    auto dB = readFloat(outF, "density");
+    ASSERT_TRUE(dB);
+    EXPECT_FLOAT_EQ(dB->metaValue<float>("lic_length"), 5.0f);
+    const json rb = json::parse(dB->metaValue<std::string>("licvdb_recipe"));
+    EXPECT_DOUBLE_EQ(rb.at("lic").at("length").get<double>(), 5.0);
+    EXPECT_EQ(rb.at("output").at("upsample").get<int>(), 1);
+    EXPECT_EQ(dB->activeVoxelCount(), openvdb::Index64(12 * 12 * 12));
+}
+
+// ---- 5. info, help, version ------------------------------------------------------------------
+
+TEST_F(CliTest, InfoHelpVersion)
+{
+    const fs::path field = makeField("abc.vdb");
+    const fs::path out = work("lic.vdb");
+    ASSERT_EQ(bake(field, out, {"--write-input", "--quiet"}).code, 0);
+
+    const RunResult info = run({"info", out.string(), "--json"});
+    ASSERT_EQ(info.code, 0) << info.describe();
+    json d;
+    ASSERT_NO_THROW(d = json::parse(info.out)) << info.describe();
+    ASSERT_TRUE(d.is_object() && d.contains("grids")) << info.out;
+    std::set<std::string> names;
+    for (const auto& g : d.at("grids")) names.insert(g.at("name").get<std::string>());
+    EXPECT_EQ(names, (std::set<std::string>{"density", "input"}));
+
+    // Text info mentions the grids too.
+    const RunResult text = run({"info", out.string()});
+    ASSERT_EQ(text.code, 0) << text.describe();
+    EXPECT_NE(text.out.find("density"), std::string::npos) << text.describe();
+
+    const RunResult hb = run({"help", "bake"});
+    EXPECT_EQ(hb.code, 0) << hb.describe();
+    EXPECT_NE(hb.out.find("--length"), std::string::npos) << hb.describe();
+
+    const RunResult hn = run({"help", "nosuch"});
+    EXPECT_EQ(hn.code, 2) << hn.describe();
+    EXPECT_NE(hn.err.find("nosuch"), std::string::npos) << hn.describe();
+
+    const std::string version = std::string("licvdb ") + LICVDB_VERSION;
+    const RunResult v = run({"--version"});
+    EXPECT_EQ(v.code, 0) << v.describe();
+    EXPECT_NE(v.out.find(version), std::string::npos) << v.describe();
+
+    const RunResult vs = run({"version"});
+    EXPECT_EQ(vs.code, 0) << vs.describe();
+    EXPECT_NE(vs.out.find(version), std::string::npos) << vs.describe();
+}
+
+// ---- 6. determinism across thread counts -----------------------------------------------------
+
+/// Same active topology and bit-identical active values.
+void expectBitIdentical(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b, const std::string& what)
+{
+    EXPECT_EQ(a.activeVoxelCount(), b.activeVoxelCount()) << what;
+    EXPECT_TRUE(a.tree().hasSameTopology(b.tree())) << what;
+    auto acc = b.getConstAccessor();
+    std::size_t differ = 0, inactive = 0;
+    std::string first;
+    for (auto it = a.cbeginValueOn(); it; ++it) {
+        float vb = 0;
+        if (!acc.probeValue(it.getCoord(), vb)) {
+            ++inactive;
+            continue;
+        }
+        const float va = *it;
+        if (std::memcmp(&va, &vb, sizeof(float)) != 0) {
+            if (differ++ == 0) {
+                std::ostringstream s;
+                s.precision(9);
+                s << it.getCoord() << ": " << va << " vs " << vb;
+                first = s.str();
+            }
+        }
+    }
+    EXPECT_EQ(inactive, 0u) << what << ": voxels active in one and not the other";
+    EXPECT_EQ(differ, 0u) << what << ": values differ, first at " << first;
+}
+
+TEST_F(CliTest, DeterministicAcrossThreadCounts)
+{
+    const fs::path field = makeField("abc.vdb", "abc", "16,16,16");
+    for (const std::string engine : {"fast", "naive"}) {
+        SCOPED_TRACE("engine " + engine);
+        const fs::path o1 = work(engine + "_t1.vdb"), o2 = work(engine + "_t2.vdb");
+        const RunResult r1 = bake(field, o1, {"--engine", engine, "--threads", "1", "--write-input", "--quiet"});
+        ASSERT_EQ(r1.code, 0) << r1.describe();
+        const RunResult r2 = bake(field, o2, {"--engine", engine, "--threads", "2", "--write-input", "--quiet"});
+        ASSERT_EQ(r2.code, 0) << r2.describe();
+        for (const std::string grid : {"density", "input"}) {
+            auto a = readFloat(o1, grid), b = readFloat(o2, grid);
+            ASSERT_TRUE(a && b) << grid;
+            expectBitIdentical(*a, *b, engine + " " + grid + ": --threads 1 vs 2");
+        }
+    }
+}
+
+// ---- 7. bad input ----------------------------------------------------------------------------
+
+struct BadCase
+{
+    std::string name;
+    /// Creates inputs in the work directory (given) and returns the licvdb arguments.
+    std::function<std::vector<std::string>(const fs::path& work, const fs::path& abcField)> setup;
+    /// Words that stderr must contain (case-insensitive).
+    std::vector<std::string> words;
+};
+
+/// A velocity field file derived from the abc field: `edit` changes the grid before writing.
+fs::path editedField(const fs::path& abc, const fs::path& out, const std::function<void(openvdb::Vec3SGrid&)>& edit)
+{
+    auto g = vdbexport::readVelocityGrid(abc.string());
+    edit(*g);
+    vdbexport::writeVdbAtomic(out.string(), {g});
+    return out;
+}
+
+std::vector<std::string> bakeArgs(const fs::path& field, const fs::path& out, std::vector<std::string> extra = {})
+{
+    std::vector<std::string> a{"bake",     "--field", field.string(), "--out", out.string(), "--length", "4",
+                               "--step",   "0.5",     "--upsample",   "1",     "--quiet"};
+    a.insert(a.end(), extra.begin(), extra.end());
+    return a;
+}
+
+const std::vector<BadCase>& badCases()
+{
+    static const std::vector<BadCase> cases = {
+        {"missing field file",
+         [](const fs::path& w, const fs::path&) { return bakeArgs(w / "nosuch.vdb", w / "out.vdb"); },
+         {"nosuch.vdb", "not found"}},
+        {"field path is a directory",
+         [](const fs::path& w, const fs::path&) {
+             fs::create_directories(w / "adir.vdb");
+             return bakeArgs(w / "adir.vdb", w / "out.vdb");
+         },
+         {"directory"}},
+        {"empty file",
+         [](const fs::path& w, const fs::path&) {
+             writeText(w / "empty.vdb", "");
+             return bakeArgs(w / "empty.vdb", w / "out.vdb");
+         },
+         {"empty"}},
+        {"text file",
+         [](const fs::path& w, const fs::path&) {
+             writeText(w / "notes.vdb", "this is not a volume\nat all\n");
+             return bakeArgs(w / "notes.vdb", w / "out.vdb");
+         },
+         {"not an OpenVDB file"}},
+        {"vdb with only a float grid",
+         [](const fs::path& w, const fs::path&) {
+             auto g = openvdb::FloatGrid::create(0.0f);
+             g->setName("temperature");
+             auto acc = g->getAccessor();
+             for (int i = 0; i < 4; ++i)
+                 for (int j = 0; j < 4; ++j)
+                     for (int k = 0; k < 4; ++k) acc.setValue(openvdb::Coord(i, j, k), float(i + j + k));
+             vdbexport::writeVdbAtomic((w / "scalar.vdb").string(), {g});
+             return bakeArgs(w / "scalar.vdb", w / "out.vdb");
+         },
+         {"Vec3", "temperature", "float"}},
+        {"--grid nosuch",
+         [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--grid", "nosuch"}); },
+         {"nosuch", "velocity"}},
+        {"field of all zeros",
+         [](const fs::path& w, const fs::path& abc) {
+             const fs::path f = editedField(abc, w / "zero.vdb", [](openvdb::Vec3SGrid& g) {
+                 for (auto it = g.beginValueOn(); it; ++it) it.setValue(openvdb::Vec3s(0.0f));
+             });
+             return bakeArgs(f, w / "out.vdb");
+         },
+         {"zero"}},
+        {"field with a NaN",
+         [](const fs::path& w, const fs::path& abc) {
+             const fs::path f = editedField(abc, w / "nan.vdb", [](openvdb::Vec3SGrid& g) {
+                 const float nan = std::numeric_limits<float>::quiet_NaN();
+                 g.tree().setValueOn(openvdb::Coord(5, 6, 7), openvdb::Vec3s(1.0f, nan, 0.0f));
+             });
+             return bakeArgs(f, w / "out.vdb");
+         },
+         {"NaN"}},
+        {"malformed JSON recipe",
+         [](const fs::path& w, const fs::path& abc) {
+             writeText(w / "bad.json", "{\"lic\": {\"length\": 5,}");
+             return bakeArgs(abc, w / "out.vdb", {"--recipe", (w / "bad.json").string()});
+         },
+         {"JSON", "bad.json"}},
+        {"unknown recipe key",
+         [](const fs::path& w, const fs::path& abc) {
+             writeText(w / "typo.json", "{\"lic\": {\"lenght\": 5}}");
+             return bakeArgs(abc, w / "out.vdb", {"--recipe", (w / "typo.json").string()});
+         },
+         {"unknown key", "lenght", "did you mean \"length\""}},
+        {"--length -1",
+         [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--length", "-1"}); },
+         {"length"}},
+        {"--step 0",
+         [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--step", "0"}); },
+         {"step"}},
+        {"--upsample 0",
+         [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--upsample", "0"}); },
+         {"upsample"}},
+        {"--engine warp",
+         [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--engine", "warp"}); },
+         {"engine", "warp"}},
+        {"output into a missing directory",
+         [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "nodir" / "out.vdb"); },
+         {"nodir", "does not exist"}},
+        {"unknown preset for field",
+         [](const fs::path& w, const fs::path&) {
+             return std::vector<std::string>{"field", "nosuchpreset", "--res", "8", "--out", (w / "out.vdb").string()};
+         },
+         {"nosuchpreset", "abc"}},
+        {"--frames 3 (not available yet)",
+         [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--frames", "3"}); },
+         {"frames", "not available"}},
+    };
+    return cases;
+}
+
+class CliBadInputTest : public CliTest, public ::testing::WithParamInterface<std::size_t>
+{
+};
+
+TEST_P(CliBadInputTest, ExitsTwoNamesProblemWritesNothing)
+{
+    const BadCase& c = badCases().at(GetParam());
+    SCOPED_TRACE(c.name);
+    const fs::path abc = makeField("abc.vdb");
+    const fs::path w = work();
+    const std::vector<std::string> args = c.setup(w, abc);
+    ASSERT_FALSE(HasFatalFailure());
+
+    std::set<std::string> before;
+    for (const auto& e : fs::recursive_directory_iterator(w)) before.insert(e.path().string());
+
+    const RunResult r = run(args);
+    EXPECT_EQ(r.code, 2) << r.describe();
+    const std::string err = lower(r.err);
+    for (const auto& word : c.words)
+        EXPECT_NE(err.find(lower(word)), std::string::npos) << "stderr lacks \"" << word << "\"\n" << r.describe();
+    EXPECT_EQ(r.out.find("\"output_voxels\""), std::string::npos) << r.describe();
+
+    // Nothing new: no .vdb, no .json, no temporary file, no directory.
+    std::vector<std::string> created;
+    for (const auto& e : fs::recursive_directory_iterator(w))
+        if (!before.count(e.path().string())) created.push_back(e.path().string());
+    EXPECT_TRUE(created.empty()) << "created: " << (created.empty() ? "" : created.front()) << "\n" << r.describe();
+    EXPECT_FALSE(fs::exists(w / "out.vdb"));
+    EXPECT_FALSE(fs::exists(w / "out.json"));
+    if (std::getenv("LICVDB_TEST_SHOW_ERRORS")) std::cout << c.name << ":\n" << r.err;
+}
+
+INSTANTIATE_TEST_SUITE_P(Cases, CliBadInputTest, ::testing::Range<std::size_t>(0, badCases().size()),
+                         [](const ::testing::TestParamInfo<std::size_t>& info) {
+                             std::string n;
+                             for (char ch : badCases()[info.param].name)
+                                 n += std::isalnum(static_cast<unsigned char>(ch)) ? ch : '_';
+                             return std::to_string(info.param) + "_" + n;
+                         });
+
+// ---- 8. fast vs naive ------------------------------------------------------------------------
+
+TEST_F(CliTest, FastAndNaiveAgree)
+{
+    const fs::path field = makeField("abc.vdb", "abc", "16,16,16");
+    const fs::path of = work("fast.vdb"), on = work("naive.vdb");
+    const RunResult rf = bake(field, of, {"--engine", "fast", "--quiet"});
+    ASSERT_EQ(rf.code, 0) << rf.describe();
+    const RunResult rn = bake(field, on, {"--engine", "naive", "--quiet"});
+    ASSERT_EQ(rn.code, 0) << rn.describe();
+
+    auto a = readFloat(of, "density"), b = readFloat(on, "density");
+    ASSERT_TRUE(a && b);
+    EXPECT_EQ(a->metaValue<std::string>("lic_engine"), "fast");
+    EXPECT_EQ(b->metaValue<std::string>("lic_engine"), "naive");
+    ASSERT_EQ(a->activeVoxelCount(), b->activeVoxelCount());
+
+    auto acc = b->getConstAccessor();
+    double n = 0, sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0;
+    for (auto it = a->cbeginValueOn(); it; ++it) {
+        float vb = 0;
+        ASSERT_TRUE(acc.probeValue(it.getCoord(), vb)) << it.getCoord() << " inactive in the naive bake";
+        const double x = *it, y = vb;
+        n += 1;
+        sa += x;
+        sb += y;
+        saa += x * x;
+        sbb += y * y;
+        sab += x * y;
+    }
+    const double cov = sab / n - (sa / n) * (sb / n);
+    const double va = saa / n - (sa / n) * (sa / n), vb = sbb / n - (sb / n) * (sb / n);
+    ASSERT_GT(va, 0);
+    ASSERT_GT(vb, 0);
+    const double corr = cov / std::sqrt(va * vb);
+    std::cout << "fast vs naive correlation over " << n << " voxels: " << corr << "\n";
+    EXPECT_GT(corr, 0.9);
+}
+
+// ---- 9. vdb_print reads the output -----------------------------------------------------------
+
+TEST_F(CliTest, VdbPrintListsDensity)
+{
+    const char* vdbPrint = "/usr/bin/vdb_print";
+    if (!fs::exists(vdbPrint)) {
+        GTEST_SKIP() << vdbPrint << " is not installed (scripts/install-deps installs it); "
+                     << "cannot check that OpenVDB's own tool reads licvdb output";
+    }
+    const fs::path field = makeField("abc.vdb");
+    const fs::path out = work("lic.vdb");
+    ASSERT_EQ(bake(field, out, {"--quiet"}).code, 0);
+    const fs::path log = mRoot / "logs" / "vdb_print.txt";
+    const std::string cmd = std::string(vdbPrint) + " " + shellQuote(out.string()) + " >" + shellQuote(log.string()) + " 2>&1";
+    const int status = std::system(cmd.c_str());
+    const std::string text = readText(log);
+    ASSERT_TRUE(WIFEXITED(status)) << text;
+    EXPECT_EQ(WEXITSTATUS(status), 0) << text;
+    EXPECT_NE(text.find("density"), std::string::npos) << text;
+}
+
+} // namespace

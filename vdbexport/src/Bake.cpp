@@ -1,1 +1,195 @@
-// placeholder
+#include "vdbexport/Bake.h"
+
+#include "vdbexport/VdbIO.h"
+
+#include "lic/Contrast.h"
+#include "lic/Engine.h"
+#include "lic/Error.h"
+#include "lic/Noise.h"
+
+#include <openvdb/openvdb.h>
+
+#include <chrono>
+#include <filesystem>
+
+namespace vdbexport {
+
+namespace fs = std::filesystem;
+
+std::string manifestPath(const std::string& vdbPath)
+{
+    fs::path p(vdbPath);
+    if (p.extension() == ".vdb") p.replace_extension(".json");
+    else p += ".json";
+    return p.string();
+}
+
+namespace {
+
+void requireNotYet(bool used, const std::string& what)
+{
+    if (used) {
+        throw lic::InputError(what + " is not available in this version of licvdb yet; remove it "
+                                     "from the recipe (see `licvdb help bake` for what is)");
+    }
+}
+
+/// Refuse recipe features that later releases add, rather than silently ignoring them.
+void checkSupported(const Recipe& r)
+{
+    requireNotYet(r.input.type != "noise", "input.type \"" + r.input.type + "\"");
+    requireNotYet(r.roi.has_value(), "roi");
+    requireNotYet(r.width.has_value(), "width");
+    requireNotYet(r.color.has_value(), "color");
+    requireNotYet(r.lic.kernel != "box", "lic.kernel \"" + r.lic.kernel + "\"");
+    requireNotYet(r.lic.engine == "splat", "lic.engine \"splat\"");
+    requireNotYet(r.animation.frames != 1, "animation.frames > 1");
+    requireNotYet(r.output.writeSeries, "output.write_series");
+    requireNotYet(r.output.writeTangent, "output.write_tangent");
+}
+
+void checkOutputDirectory(const std::string& out)
+{
+    fs::path dir = fs::path(out).parent_path();
+    if (dir.empty()) dir = ".";
+    std::error_code ec;
+    if (!fs::is_directory(dir, ec)) {
+        throw lic::InputError("output directory \"" + dir.string() + "\" does not exist (for --out " + out + ")");
+    }
+    if (fs::is_directory(out, ec)) {
+        throw lic::InputError("output path \"" + out + "\" is a directory; expected a .vdb file name");
+    }
+}
+
+nlohmann::json bboxJson(const openvdb::BBoxd& b)
+{
+    return {{b.min()[0], b.min()[1], b.min()[2]}, {b.max()[0], b.max()[1], b.max()[2]}};
+}
+
+openvdb::BBoxd worldBBoxOf(const openvdb::GridBase& grid)
+{
+    const openvdb::CoordBBox ib = grid.evalActiveVoxelBoundingBox();
+    openvdb::BBoxd out;
+    for (int c = 0; c < 8; ++c) {
+        const openvdb::Vec3d corner((c & 1) ? ib.max()[0] + 0.5 : ib.min()[0] - 0.5,
+                                    (c & 2) ? ib.max()[1] + 0.5 : ib.min()[1] - 0.5,
+                                    (c & 4) ? ib.max()[2] + 0.5 : ib.min()[2] - 0.5);
+        out.expand(grid.transform().indexToWorld(corner));
+    }
+    return out;
+}
+
+} // namespace
+
+nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
+{
+    using Clock = std::chrono::steady_clock;
+    auto seconds = [](Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); };
+    const auto t0 = Clock::now();
+
+    recipe.validate();
+    recipe.validatePaths();
+    checkSupported(recipe);
+    checkOutputDirectory(recipe.output.path);
+    openvdb::initialize();
+
+    lic::LicSettings settings;
+    settings.engine = lic::engineFromString(recipe.lic.engine);
+    settings.integrator = lic::integratorFromString(recipe.lic.integrator);
+    settings.length = recipe.lic.length;
+    settings.step = recipe.lic.step;
+    settings.tolerance = recipe.lic.tolerance;
+    settings.minHits = recipe.lic.minHits;
+    settings.threads = recipe.threads;
+    settings.validate();
+
+    // 1. Field.
+    std::string gridName;
+    openvdb::Vec3SGrid::Ptr grid = readVelocityGrid(recipe.field.path, recipe.field.grid, &gridName);
+    const lic::VelocityField field(grid);
+    const lic::OutputDomain domain(field, recipe.output.upsample);
+    const double tRead = seconds(t0);
+
+    // 2. Input texture and convolution.
+    const auto t1 = Clock::now();
+    const lic::NoiseTexture noise(recipe.input.seed, domain.indexBBox(),
+                                  lic::noiseFilterFromString(recipe.input.noiseFilter));
+    const double tInput = seconds(t1);
+    lic::LicResult result = lic::convolve(field, domain, noise, settings, progress);
+
+    // 3. Contrast.
+    const auto t2 = Clock::now();
+    std::vector<float>& density = result.channels[0];
+    const lic::ChannelStats raw = recipe.output.contrast == "stretch"
+                                      ? lic::contrastStretch(domain, density)
+                                      : lic::channelStats(domain, density);
+
+    // 4. Grids and metadata.
+    const nlohmann::json resolved = recipe.toJson();
+    openvdb::FloatGrid::Ptr densityGrid = domain.makeGrid(density, "density");
+    densityGrid->insertMeta("licvdb_version", openvdb::StringMetadata(LICVDB_VERSION));
+    densityGrid->insertMeta("licvdb_recipe", openvdb::StringMetadata(resolved.dump()));
+    densityGrid->insertMeta("licvdb_field_grid", openvdb::StringMetadata(gridName));
+    densityGrid->insertMeta("lic_engine", openvdb::StringMetadata(recipe.lic.engine));
+    densityGrid->insertMeta("lic_kernel", openvdb::StringMetadata(recipe.lic.kernel));
+    densityGrid->insertMeta("lic_length", openvdb::FloatMetadata(float(recipe.lic.length)));
+    densityGrid->insertMeta("lic_step", openvdb::FloatMetadata(float(recipe.lic.step)));
+    densityGrid->insertMeta("lic_frames", openvdb::Int32Metadata(1));
+    densityGrid->insertMeta("lic_frame", openvdb::Int32Metadata(1));
+    densityGrid->insertMeta("lic_cyclic", openvdb::BoolMetadata(false));
+    openvdb::GridPtrVec grids{densityGrid};
+    if (recipe.output.writeInput) {
+        std::vector<float> input(domain.slotCount(), 0.0f);
+        for (std::size_t s = 0; s < input.size(); ++s)
+            if (domain.isActive(s)) input[s] = noise.voxel(domain.coordOf(s));
+        grids.push_back(domain.makeGrid(input, "input"));
+    }
+    const double tCompose = seconds(t2);
+
+    // 5. Manifest and files (the VDB first: a manifest never points at a missing file).
+    const auto t3 = Clock::now();
+    nlohmann::json manifest;
+    manifest["licvdb_version"] = LICVDB_VERSION;
+    manifest["recipe"] = resolved;
+    manifest["frames"] = 1;
+    manifest["cyclic"] = false;
+    manifest["files"] = {fs::path(recipe.output.path).filename().string()};
+    manifest["voxel_size"] = domain.voxelSize();
+    manifest["colormap"] = nullptr;
+    manifest["range"] = nullptr;
+    manifest["grids"] = nlohmann::json::array();
+    for (const auto& g : grids) {
+        const openvdb::Vec3d vs = g->voxelSize();
+        manifest["grids"].push_back({{"name", g->getName()},
+                                     {"type", g->valueType()},
+                                     {"active_voxels", g->activeVoxelCount()},
+                                     {"voxel_size", {vs[0], vs[1], vs[2]}},
+                                     {"world_bbox", bboxJson(worldBBoxOf(*g))}});
+    }
+    writeVdbAtomic(recipe.output.path, grids);
+    writeTextAtomic(manifestPath(recipe.output.path), manifest.dump(2) + "\n");
+    const double tWrite = seconds(t3);
+
+    const lic::LicStats& st = result.stats;
+    return {
+        {"output", recipe.output.path},
+        {"manifest", manifestPath(recipe.output.path)},
+        {"field", {{"path", recipe.field.path}, {"grid", gridName},
+                   {"active_voxels", field.activeVoxelCount()}, {"world_bbox", bboxJson(field.worldBBox())}}},
+        {"engine", recipe.lic.engine},
+        {"output_voxels", st.voxels},
+        {"output_bbox", {{domain.indexBBox().min()[0], domain.indexBBox().min()[1], domain.indexBBox().min()[2]},
+                         {domain.indexBBox().max()[0], domain.indexBBox().max()[1], domain.indexBBox().max()[2]}}},
+        {"streamlines", st.streamlines},
+        {"samples", st.samples},
+        {"samples_per_voxel", st.samplesPerVoxel()},
+        {"deposits", st.deposits},
+        {"rounds", st.rounds},
+        {"raw_mean", raw.mean},
+        {"raw_stddev", raw.stddev},
+        {"seconds", {{"read", tRead}, {"input", tInput}, {"convolve", st.seconds}, {"compose", tCompose},
+                     {"write", tWrite}, {"total", seconds(t0)}}},
+    };
+}
+
+} // namespace vdbexport

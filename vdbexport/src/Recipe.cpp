@@ -119,7 +119,8 @@ template <> struct Schema<InputSpec>
         return std::make_tuple(field("type", &InputSpec::type), field("distribution", &InputSpec::distribution),
             field("spacing", &InputSpec::spacing), field("jitter", &InputSpec::jitter),
             field("radii", &InputSpec::radii), field("halo_scale", &InputSpec::haloScale),
-            field("seed", &InputSpec::seed), field("surface", &InputSpec::surface));
+            field("seed", &InputSpec::seed), field("noise_filter", &InputSpec::noiseFilter),
+            field("surface", &InputSpec::surface));
     }
 };
 template <> struct Schema<RoiSpec>
@@ -408,6 +409,7 @@ void Recipe::validate() const
 
     checkChoice("input.type", input.type);
     checkChoice("input.distribution", input.distribution);
+    checkChoice("input.noise_filter", input.noiseFilter);
     checkPositive("input.spacing", input.spacing);
     checkRange("input.jitter", input.jitter, 0, 1, false, false);
     if (input.radii.empty()) violation("input.radii", "a non-empty array of radii", "[]");
@@ -520,6 +522,7 @@ const std::vector<std::string>& allowedValues(const std::string& keyPath)
         {"lic.integrator", {"rk4", "rk45"}},
         {"input.type", {"noise", "spots"}},
         {"input.distribution", {"regular", "random", "jittered", "poisson"}},
+        {"input.noise_filter", {"binomial", "none"}},
         {"roi.mode", {"pre", "post"}},
         {"output.contrast", {"stretch", "none"}},
     };

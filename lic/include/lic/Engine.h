@@ -32,7 +32,7 @@ struct LicSettings
     int threads = 0;         ///< worker threads, 0 = all cores
     /// fast: a streamline stops after this many consecutive samples in voxels that were
     /// already covered (plus the kernel half-length it needs to finish its window).
-    int coveredRun = 8;
+    int coveredRun = 64;
     /// fast: longest streamline per direction in output voxels; 0 = automatic (see FastLic.h).
     double maxStreamline = 0.0;
 

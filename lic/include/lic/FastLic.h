@@ -89,8 +89,6 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
     std::vector<std::int64_t> seeds;
     seeds.reserve(tiles.size());
     const int minHits = settings.minHits;
-    // ∂idx/∂x of the output map: idxPerWorld[a][b] = ∂idx_b/∂x_a (OpenVDB's row-vector layout).
-    const openvdb::Mat3d idxPerWorld = domain.map().worldToIndex.getMat3();
     const int coveredRun = settings.coveredRun;
 
     // Trace one side; `slots` receives each sample's slot. Returns true when the side ended

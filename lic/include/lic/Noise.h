@@ -4,8 +4,11 @@
 
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <string>
+#include <vector>
 
 namespace lic {
 
@@ -30,25 +33,40 @@ inline float whiteNoise(std::uint64_t seed, int i, int j, int k)
     return float(hashCoord(seed, i, j, k) >> 40) * (1.0f / 16777216.0f);
 }
 
-/// The noise input texture: per-voxel white noise, reconstructed trilinearly between voxel
-/// centres so that streamline samples between voxels see a continuous texture.
-/// Positions are OUTPUT index space. One channel.
+/// How the per-voxel white noise is reconstructed between voxel centres.
+enum class NoiseFilter {
+    None,    ///< trilinear interpolation of the raw per-voxel values
+    Binomial ///< each voxel's value low-passed by the separable 3³ binomial [¼ ½ ¼] first
+};
+/// @throw lic::InputError for names other than "binomial" and "none".
+NoiseFilter noiseFilterFromString(const std::string&);
+
+/// The dense noise input texture. Each output voxel has a white-noise value in [0, 1) from a hash
+/// of (seed, voxel); with NoiseFilter::Binomial the texture value of a voxel is the [¼ ½ ¼]³
+/// weighted mean of its 3³ neighbourhood (band-limiting the noise to what the output grid can
+/// represent, so streamlines are anti-aliased and fast-LIC's off-centre deposits stay accurate).
+/// Between voxel centres the texture is trilinear. Values are precomputed over a box (the output
+/// bounding box plus a margin); positions beyond it clamp to its edge. Any sub-box gives the same
+/// values whatever box it is computed in. Positions are OUTPUT index space; one channel.
 class NoiseTexture
 {
 public:
     static constexpr int kChannels = 1;
 
-    explicit NoiseTexture(std::uint64_t seed) : mSeed(seed) {}
+    /// @param box output voxels to precompute (inclusive); ~4 bytes per voxel of box + margin.
+    NoiseTexture(std::uint64_t seed, const openvdb::CoordBBox& box,
+                 NoiseFilter filter = NoiseFilter::Binomial);
 
     std::uint64_t seed() const { return mSeed; }
+    NoiseFilter filter() const { return mFilter; }
 
-    /// Value at voxel (i, j, k): what `--write-input` writes.
-    float voxel(const openvdb::Coord& ijk) const { return whiteNoise(mSeed, ijk[0], ijk[1], ijk[2]); }
+    /// Texture value at voxel (i, j, k): what `--write-input` writes.
+    float voxel(const openvdb::Coord& ijk) const { return at(ijk[0], ijk[1], ijk[2]); }
 
     /// Trilinear value at a continuous output-index position.
     void sample(const openvdb::Vec3d& p, float* out) const { sampleGradient(p, out, nullptr); }
 
-    /// Trilinear value and, if `grad` is non-null, its gradient (d/di, d/dj, d/dk) per channel.
+    /// Trilinear value and, if `grad` is non-null, its gradient (d/di, d/dj, d/dk).
     void sampleGradient(const openvdb::Vec3d& p, float* out, float* grad) const
     {
         const double fx0 = std::floor(p[0]), fy0 = std::floor(p[1]), fz0 = std::floor(p[2]);
@@ -57,7 +75,7 @@ public:
         float n[2][2][2];
         for (int a = 0; a < 2; ++a)
             for (int b = 0; b < 2; ++b)
-                for (int c = 0; c < 2; ++c) n[a][b][c] = whiteNoise(mSeed, i + a, j + b, k + c);
+                for (int c = 0; c < 2; ++c) n[a][b][c] = at(i + a, j + b, k + c);
         auto lerp = [](float u, float v, float t) { return u + (v - u) * t; };
         const float c00 = lerp(n[0][0][0], n[0][0][1], fz), c01 = lerp(n[0][1][0], n[0][1][1], fz);
         const float c10 = lerp(n[1][0][0], n[1][0][1], fz), c11 = lerp(n[1][1][0], n[1][1][1], fz);
@@ -73,7 +91,19 @@ public:
     }
 
 private:
+    float at(int i, int j, int k) const
+    {
+        i = std::clamp(i - mLo[0], 0, mDim[0] - 1);
+        j = std::clamp(j - mLo[1], 0, mDim[1] - 1);
+        k = std::clamp(k - mLo[2], 0, mDim[2] - 1);
+        return mData[(std::size_t(i) * std::size_t(mDim[1]) + std::size_t(j)) * std::size_t(mDim[2]) + std::size_t(k)];
+    }
+
     std::uint64_t mSeed;
+    NoiseFilter mFilter;
+    openvdb::Coord mLo;
+    int mDim[3];
+    std::vector<float> mData;
 };
 
 /// A constant texture (every channel = `value`): LIC of it must return `value` everywhere.

@@ -57,6 +57,7 @@ struct InputSpec
     std::vector<double> radii{1.0};       ///< `radii`: spot radii, output voxels, > 0, strictly increasing
     double haloScale = 2.0;               ///< `halo_scale`: halo radius / spot radius, >= 1
     std::uint64_t seed = 1;               ///< `seed`: hash seed for noise and spot positions
+    std::string noiseFilter = "binomial"; ///< `noise_filter`: "binomial" (3³ low-pass) | "none"
     std::optional<SurfaceSpec> surface;   ///< `surface`: null = spots fill the volume
 
     bool operator==(const InputSpec&) const = default;

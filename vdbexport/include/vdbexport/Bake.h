@@ -1,0 +1,25 @@
+// A whole bake: recipe → field → LIC → grids → .vdb + JSON manifest, written atomically.
+#pragma once
+
+#include "vdbexport/Recipe.h"
+
+#include "lic/Progress.h"
+
+#include <nlohmann/json.hpp>
+
+#include <string>
+
+namespace vdbexport {
+
+/// The sidecar manifest path of a bake: OUT.vdb → OUT.json.
+std::string manifestPath(const std::string& vdbPath);
+
+/// Run the bake described by `recipe` (validated here, paths included): read the field, convolve,
+/// normalise, and write `recipe.output.path` plus its manifest, both atomically (a failed bake
+/// leaves neither). Returns the summary that `licvdb bake --json` prints: output paths, voxel
+/// counts, streamlines, samples per voxel and per-stage seconds.
+/// @throw lic::InputError for bad input or recipe values (including features a later release
+///        adds: spots, ROI, width, colour, exp kernel, animation); lic::Error on runtime failure.
+nlohmann::json bake(const Recipe& recipe, lic::Progress& progress = lic::nullProgress());
+
+} // namespace vdbexport
