@@ -452,6 +452,9 @@ TEST_F(CliTest, InfoHelpVersion)
     EXPECT_NE(hn.err.find("nosuch"), std::string::npos) << hn.describe();
 
     const std::string version = std::string("licvdb ") + LICVDB_VERSION;
+    const RunResult none = run({});
+    EXPECT_EQ(none.code, 2) << none.describe();
+
     const RunResult v = run({"--version"});
     EXPECT_EQ(v.code, 0) << v.describe();
     EXPECT_NE(v.out.find(version), std::string::npos) << v.describe();
@@ -529,10 +532,18 @@ fs::path editedField(const fs::path& abc, const fs::path& out, const std::functi
     return out;
 }
 
+/// A small bake; `extra` flags are appended, and replace the defaults --length 4, --step 0.5 and
+/// --upsample 1 when they name the same flag (CLI11 rejects a flag given twice).
 std::vector<std::string> bakeArgs(const fs::path& field, const fs::path& out, std::vector<std::string> extra = {})
 {
-    std::vector<std::string> a{"bake",     "--field", field.string(), "--out", out.string(), "--length", "4",
-                               "--step",   "0.5",     "--upsample",   "1",     "--quiet"};
+    std::vector<std::string> a{"bake", "--field", field.string(), "--out", out.string(), "--quiet"};
+    for (const auto& [flag, value] : std::vector<std::pair<std::string, std::string>>{
+             {"--length", "4"}, {"--step", "0.5"}, {"--upsample", "1"}}) {
+        if (std::find(extra.begin(), extra.end(), flag) == extra.end()) {
+            a.push_back(flag);
+            a.push_back(value);
+        }
+    }
     a.insert(a.end(), extra.begin(), extra.end());
     return a;
 }
@@ -607,7 +618,7 @@ const std::vector<BadCase>& badCases()
          {"unknown key", "lenght", "did you mean \"length\""}},
         {"--length -1",
          [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--length", "-1"}); },
-         {"length"}},
+         {"length", "-1"}},
         {"--step 0",
          [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--step", "0"}); },
          {"step"}},
@@ -625,6 +636,9 @@ const std::vector<BadCase>& badCases()
              return std::vector<std::string>{"field", "nosuchpreset", "--res", "8", "--out", (w / "out.vdb").string()};
          },
          {"nosuchpreset", "abc"}},
+        {"unknown flag",
+         [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--nosuch"}); },
+         {"--nosuch"}},
         {"--frames 3 (not available yet)",
          [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--frames", "3"}); },
          {"frames", "not available"}},
@@ -666,11 +680,11 @@ TEST_P(CliBadInputTest, ExitsTwoNamesProblemWritesNothing)
 }
 
 INSTANTIATE_TEST_SUITE_P(Cases, CliBadInputTest, ::testing::Range<std::size_t>(0, badCases().size()),
-                         [](const ::testing::TestParamInfo<std::size_t>& info) {
+                         [](const ::testing::TestParamInfo<std::size_t>& param) {
                              std::string n;
-                             for (char ch : badCases()[info.param].name)
+                             for (char ch : badCases()[param.param].name)
                                  n += std::isalnum(static_cast<unsigned char>(ch)) ? ch : '_';
-                             return std::to_string(info.param) + "_" + n;
+                             return std::to_string(param.param) + "_" + n;
                          });
 
 // ---- 8. fast vs naive ------------------------------------------------------------------------

@@ -79,6 +79,7 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
     {
         std::vector<Vec3d> fwd, bwd;              // world positions
         std::vector<std::int64_t> slotF, slotB;   // output slot per sample (−1 = none)
+        std::vector<Vec3d> idxF, idxB;            // output-index position per sample
         std::vector<Vec3d> idx;                   // output-index positions, assembled
         std::vector<std::int64_t> slot;           // slots, assembled
         std::vector<double> prefix;               // prefix sums, (N + 1) × C
@@ -94,12 +95,14 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
     // Trace one side; `slots` receives each sample's slot. Returns true when the side ended
     // naturally (boundary or critical point), i.e. its last windows are complete.
     auto traceSide = [&](const Vec3d& seedW, double sign, std::vector<Vec3d>& pts,
-                         std::vector<std::int64_t>& slots) {
+                         std::vector<std::int64_t>& slots, std::vector<Vec3d>& idx) {
         pts.clear();
         slots.clear();
+        idx.clear();
         int run = 0, tail = -1;
         const StopReason why = traceStreamline(field, seedW, sign, ts, pts, [&](const Vec3d& p) {
-            const std::int64_t s = domain.slotOf(OutputDomain::nearestVoxel(domain.map().toIndex(p)));
+            idx.push_back(domain.map().toIndex(p));
+            const std::int64_t s = domain.slotOf(OutputDomain::nearestVoxel(idx.back()));
             slots.push_back(s);
             if (tail >= 0) return --tail > 0;
             run = (s < 0 || std::atomic_ref<std::uint8_t>(covered[std::size_t(s)])
@@ -116,20 +119,20 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
         Line& L = tls.local();
         const openvdb::Coord ijk = domain.coordOf(std::size_t(seedSlot));
         const Vec3d seedW = domain.worldOf(ijk);
-        const bool bwdNatural = traceSide(seedW, -1.0, L.bwd, L.slotB);
-        const bool fwdNatural = traceSide(seedW, +1.0, L.fwd, L.slotF);
+        const bool bwdNatural = traceSide(seedW, -1.0, L.bwd, L.slotB, L.idxB);
+        const bool fwdNatural = traceSide(seedW, +1.0, L.fwd, L.slotF, L.idxF);
         const std::size_t B = L.bwd.size(), F = L.fwd.size(), N = B + 1 + F;
 
         L.idx.resize(N);
         L.slot.resize(N);
         for (std::size_t i = 0; i < B; ++i) {
-            L.idx[i] = domain.map().toIndex(L.bwd[B - 1 - i]);
+            L.idx[i] = L.idxB[B - 1 - i];
             L.slot[i] = L.slotB[B - 1 - i];
         }
         L.idx[B] = ijk.asVec3d();
         L.slot[B] = seedSlot;
         for (std::size_t i = 0; i < F; ++i) {
-            L.idx[B + 1 + i] = domain.map().toIndex(L.fwd[i]);
+            L.idx[B + 1 + i] = L.idxF[i];
             L.slot[B + 1 + i] = L.slotF[i];
         }
         // Per sample: C values, then 3·C gradient components (output-index units).

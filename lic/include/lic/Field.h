@@ -23,8 +23,16 @@ struct AffineMap
     /// @throw lic::InputError if the transform is not linear (e.g. a frustum map).
     explicit AffineMap(const openvdb::math::Transform& xform);
 
-    openvdb::Vec3d toIndex(const openvdb::Vec3d& w) const { return worldToIndex.transformH(w); }
-    openvdb::Vec3d toWorld(const openvdb::Vec3d& i) const { return indexToWorld.transformH(i); }
+    openvdb::Vec3d toIndex(const openvdb::Vec3d& w) const { return apply(worldToIndex, w); }
+    openvdb::Vec3d toWorld(const openvdb::Vec3d& i) const { return apply(indexToWorld, i); }
+
+    /// p·M for an affine matrix in OpenVDB's row-vector layout (no homogeneous divide).
+    static openvdb::Vec3d apply(const openvdb::Mat4d& m, const openvdb::Vec3d& p)
+    {
+        return openvdb::Vec3d(p[0] * m[0][0] + p[1] * m[1][0] + p[2] * m[2][0] + m[3][0],
+                              p[0] * m[0][1] + p[1] * m[1][1] + p[2] * m[2][1] + m[3][1],
+                              p[0] * m[0][2] + p[1] * m[1][2] + p[2] * m[2][2] + m[3][2]);
+    }
 };
 
 /// The velocity field of a bake: a Vec3 grid whose values are world-space vectors, placed in the
