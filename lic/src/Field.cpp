@@ -129,21 +129,6 @@ openvdb::BBoxd VelocityField::worldBBox() const
     return out;
 }
 
-openvdb::Vec3d VelocityField::sampleCentred(const openvdb::Vec3d& idx) const
-{
-    const double x = std::floor(idx[0]), y = std::floor(idx[1]), z = std::floor(idx[2]);
-    const double fx = idx[0] - x, fy = idx[1] - y, fz = idx[2] - z;
-    const int i = int(x), j = int(y), k = int(z);
-    const openvdb::Vec3d c000 = at(i, j, k), c001 = at(i, j, k + 1), c010 = at(i, j + 1, k),
-                         c011 = at(i, j + 1, k + 1), c100 = at(i + 1, j, k),
-                         c101 = at(i + 1, j, k + 1), c110 = at(i + 1, j + 1, k),
-                         c111 = at(i + 1, j + 1, k + 1);
-    const openvdb::Vec3d c00 = c000 + (c001 - c000) * fz, c01 = c010 + (c011 - c010) * fz,
-                         c10 = c100 + (c101 - c100) * fz, c11 = c110 + (c111 - c110) * fz;
-    const openvdb::Vec3d c0 = c00 + (c01 - c00) * fy, c1 = c10 + (c11 - c10) * fy;
-    return c0 + (c1 - c0) * fx;
-}
-
 bool VelocityField::sampleGradient(const openvdb::Vec3d& world, openvdb::Vec3d& v,
                                    openvdb::Mat3d& dv) const
 {

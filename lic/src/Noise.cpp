@@ -22,8 +22,9 @@ NoiseTexture::NoiseTexture(std::uint64_t seed, const openvdb::CoordBBox& box, No
     const openvdb::Coord hi = box.max() + openvdb::Coord(1);
     for (int a = 0; a < 3; ++a) mDim[a] = hi[a] - mLo[a] + 1;
     const std::size_t nx = std::size_t(mDim[0]), ny = std::size_t(mDim[1]), nz = std::size_t(mDim[2]);
-    mData.resize(nx * ny * nz);
-    auto index = [&](std::size_t i, std::size_t j, std::size_t k) { return (i * ny + j) * nz + k; };
+    for (int a = 0; a < 3; ++a) mBricks[a] = (mDim[a] + 7) / 8;
+    mData.assign(std::size_t(mBricks[0]) * mBricks[1] * mBricks[2] * 512, 0.0f);
+    auto index = [&](std::size_t i, std::size_t j, std::size_t k) { return offset(int(i), int(j), int(k)); };
 
     if (filter == NoiseFilter::None) {
         tbb::parallel_for(std::size_t(0), nx, [&](std::size_t i) {

@@ -30,20 +30,20 @@ void requireNotYet(bool used, const std::string& what)
 {
     if (used) {
         throw lic::InputError(what + " is not available in this version of licvdb yet; remove it "
-                                     "from the recipe (see `licvdb help bake` for what is)");
+                                     "from the recipe or command line (see `licvdb help bake`)");
     }
 }
 
 /// Refuse recipe features that later releases add, rather than silently ignoring them.
 void checkSupported(const Recipe& r)
 {
-    requireNotYet(r.input.type != "noise", "input.type \"" + r.input.type + "\"");
+    requireNotYet(r.input.type != "noise", "input.type (--input) \"" + r.input.type + "\"");
     requireNotYet(r.roi.has_value(), "roi");
     requireNotYet(r.width.has_value(), "width");
     requireNotYet(r.color.has_value(), "color");
-    requireNotYet(r.lic.kernel != "box", "lic.kernel \"" + r.lic.kernel + "\"");
+    requireNotYet(r.lic.kernel != "box", "lic.kernel (--kernel) \"" + r.lic.kernel + "\"");
     requireNotYet(r.lic.engine == "splat", "lic.engine \"splat\"");
-    requireNotYet(r.animation.frames != 1, "animation.frames > 1");
+    requireNotYet(r.animation.frames != 1, "animation.frames (--frames) > 1");
     requireNotYet(r.output.writeSeries, "output.write_series");
     requireNotYet(r.output.writeTangent, "output.write_tangent");
 }

@@ -96,13 +96,22 @@ private:
         i = std::clamp(i - mLo[0], 0, mDim[0] - 1);
         j = std::clamp(j - mLo[1], 0, mDim[1] - 1);
         k = std::clamp(k - mLo[2], 0, mDim[2] - 1);
-        return mData[(std::size_t(i) * std::size_t(mDim[1]) + std::size_t(j)) * std::size_t(mDim[2]) + std::size_t(k)];
+        return mData[offset(i, j, k)];
+    }
+    /// Storage is in 8³ bricks so the 8 corners of a lookup usually share a brick (cache lines).
+    std::size_t offset(int i, int j, int k) const
+    {
+        const std::size_t brick =
+            (std::size_t(i >> 3) * std::size_t(mBricks[1]) + std::size_t(j >> 3)) * std::size_t(mBricks[2]) +
+            std::size_t(k >> 3);
+        return brick * 512 + std::size_t(((i & 7) << 6) | ((j & 7) << 3) | (k & 7));
     }
 
     std::uint64_t mSeed;
     NoiseFilter mFilter;
     openvdb::Coord mLo;
     int mDim[3];
+    int mBricks[3];
     std::vector<float> mData;
 };
 
