@@ -120,13 +120,7 @@ VelocityField::VelocityField(openvdb::Vec3SGrid::ConstPtr grid)
 
 openvdb::BBoxd VelocityField::worldBBox() const
 {
-    openvdb::BBoxd out;
-    for (int c = 0; c < 8; ++c) {
-        const openvdb::Vec3d corner((c & 1) ? mHi[0] : mLo[0], (c & 2) ? mHi[1] : mLo[1],
-                                    (c & 4) ? mHi[2] : mLo[2]);
-        out.expand(mMap.toWorld(corner));
-    }
-    return out;
+    return transform().indexToWorld(openvdb::BBoxd(mLo, mHi));
 }
 
 bool VelocityField::sampleGradient(const openvdb::Vec3d& world, openvdb::Vec3d& v,

@@ -66,17 +66,12 @@ nlohmann::json bboxJson(const openvdb::BBoxd& b)
     return {{b.min()[0], b.min()[1], b.min()[2]}, {b.max()[0], b.max()[1], b.max()[2]}};
 }
 
+/// World bounds of a grid's active voxels' extents (index bbox ± ½ voxel through the transform).
 openvdb::BBoxd worldBBoxOf(const openvdb::GridBase& grid)
 {
     const openvdb::CoordBBox ib = grid.evalActiveVoxelBoundingBox();
-    openvdb::BBoxd out;
-    for (int c = 0; c < 8; ++c) {
-        const openvdb::Vec3d corner((c & 1) ? ib.max()[0] + 0.5 : ib.min()[0] - 0.5,
-                                    (c & 2) ? ib.max()[1] + 0.5 : ib.min()[1] - 0.5,
-                                    (c & 4) ? ib.max()[2] + 0.5 : ib.min()[2] - 0.5);
-        out.expand(grid.transform().indexToWorld(corner));
-    }
-    return out;
+    return grid.transform().indexToWorld(
+        openvdb::BBoxd(ib.min().asVec3d() - openvdb::Vec3d(0.5), ib.max().asVec3d() + openvdb::Vec3d(0.5)));
 }
 
 } // namespace
