@@ -80,15 +80,17 @@ OutputDomain::OutputDomain(const VelocityField& field, int upsample)
     }
 }
 
-openvdb::FloatGrid::Ptr OutputDomain::makeGrid(const std::vector<float>& slots,
-                                               const std::string& name) const
+template<typename GridT>
+typename GridT::Ptr OutputDomain::makeGrid(const std::vector<typename GridT::ValueType>& slots,
+                                           const std::string& name) const
 {
-    using LeafT = openvdb::FloatTree::LeafNodeType;
+    using LeafT = typename GridT::TreeType::LeafNodeType;
+    using ValueT = typename GridT::ValueType;
     std::vector<LeafT*> leaves(blockCount(), nullptr);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blockCount()), [&](const auto& r) {
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
-            auto* leaf = new LeafT(mBlockOrigins[b], 0.0f, false);
-            const float* src = slots.data() + b * kBlockVoxels;
+            auto* leaf = new LeafT(mBlockOrigins[b], openvdb::zeroVal<ValueT>(), false);
+            const ValueT* src = slots.data() + b * kBlockVoxels;
             for (auto it = mMasks[b]._Find_first(); it < std::size_t(kBlockVoxels);
                  it = mMasks[b]._Find_next(it)) {
                 leaf->setValueOn(openvdb::Index(it), src[it]);
@@ -96,12 +98,21 @@ openvdb::FloatGrid::Ptr OutputDomain::makeGrid(const std::vector<float>& slots,
             leaves[b] = leaf;
         }
     });
-    auto grid = openvdb::FloatGrid::create(0.0f);
+    auto grid = GridT::create(openvdb::zeroVal<ValueT>());
     for (LeafT* leaf : leaves) grid->tree().addLeaf(leaf);
     grid->setTransform(mTransform->copy());
     grid->setName(name);
-    grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+    if constexpr (std::is_floating_point_v<ValueT>) {
+        grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+    } else {
+        grid->setVectorType(openvdb::VEC_INVARIANT); // unit directions
+    }
     return grid;
 }
+
+template openvdb::FloatGrid::Ptr OutputDomain::makeGrid<openvdb::FloatGrid>(const std::vector<float>&,
+                                                                          const std::string&) const;
+template openvdb::Vec3SGrid::Ptr OutputDomain::makeGrid<openvdb::Vec3SGrid>(
+    const std::vector<openvdb::Vec3s>&, const std::string&) const;
 
 } // namespace lic

@@ -390,6 +390,32 @@ TEST_F(CliTest, WriteInputAddsInputGrid)
 
 // ---- 4. recipe and flag precedence -----------------------------------------------------------
 
+TEST_F(CliTest, WriteTangentAddsUnitFlowDirection)
+{
+    const fs::path field = makeField("abc.vdb");
+    const fs::path out = work("lic.vdb");
+    const RunResult r = bake(field, out, {"--write-tangent", "--quiet"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    auto grids = readAll(out);
+    ASSERT_TRUE(grids.count("tangent")) << "no `tangent` grid in " << out;
+    auto tangent = openvdb::gridPtrCast<openvdb::Vec3SGrid>(grids["tangent"]);
+    ASSERT_TRUE(tangent) << "`tangent` is not a vec3s grid";
+    auto density = readFloat(out, "density");
+    EXPECT_TRUE(tangent->tree().hasSameTopology(density->tree()));
+    // ABC flow at a voxel centre: the tangent is its normalised velocity.
+    const double A = std::sqrt(3.0), B = std::sqrt(2.0), C = 1.0;
+    int checked = 0;
+    for (auto it = tangent->cbeginValueOn(); it && checked < 200; ++it, ++checked) {
+        const openvdb::Vec3d p = tangent->indexToWorld(it.getCoord());
+        openvdb::Vec3d v(A * std::sin(p[2]) + C * std::cos(p[1]), B * std::sin(p[0]) + A * std::cos(p[2]),
+                         C * std::sin(p[1]) + B * std::cos(p[0]));
+        const openvdb::Vec3d t = *it;
+        EXPECT_NEAR(t.length(), 1.0, 1e-5);
+        EXPECT_GT(t.dot(v.unitSafe()), 0.95) << "at " << p; // trilinear field vs closed form
+    }
+    EXPECT_EQ(checked, 200);
+}
+
 TEST_F(CliTest, RecipeSetsLengthAndFlagOverrides)
 {
     const fs::path field = makeField("abc.vdb");

@@ -115,8 +115,9 @@ int main(int argc, char** argv)
     auto* oSeed = bake->add_option("--seed", cli.input.seed, "Noise seed [1]");
     auto* oContrast = bake->add_option("--contrast", cli.output.contrast, "stretch|none [stretch]");
     auto* oFrames = bake->add_option("--frames", cli.animation.frames, "Frames of a cyclic animation [1]");
-    bool writeInput = false;
+    bool writeInput = false, writeTangent = false;
     auto* oWriteInput = bake->add_flag("--write-input", writeInput, "Also write the input texture as grid `input`");
+    auto* oWriteTangent = bake->add_flag("--write-tangent", writeTangent, "Also write the unit flow direction as vec3s grid `tangent`");
     addCommon(bake, bakeCommon);
     bake->footer(
         "Lengths are in output voxels (field voxel size / upsample).\n\n"
@@ -220,6 +221,7 @@ int main(int argc, char** argv)
             if (oContrast->count()) r.output.contrast = cli.output.contrast;
             if (oFrames->count()) r.animation.frames = cli.animation.frames;
             if (oWriteInput->count()) r.output.writeInput = true;
+            if (oWriteTangent->count()) r.output.writeTangent = true;
             if (bake->get_option("--threads")->count()) r.threads = bakeCommon.threads;
 
             vdbexport::TerminalProgress progress(bakeCommon.quiet);

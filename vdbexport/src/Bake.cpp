@@ -9,6 +9,8 @@
 
 #include <openvdb/openvdb.h>
 
+#include <tbb/parallel_for.h>
+
 #include <chrono>
 #include <filesystem>
 
@@ -45,7 +47,6 @@ void checkSupported(const Recipe& r)
     requireNotYet(r.lic.engine == "splat", "lic.engine \"splat\"");
     requireNotYet(r.animation.frames != 1, "animation.frames (--frames) > 1");
     requireNotYet(r.output.writeSeries, "output.write_series");
-    requireNotYet(r.output.writeTangent, "output.write_tangent");
 }
 
 void checkOutputDirectory(const std::string& out)
@@ -138,6 +139,22 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
         for (std::size_t s = 0; s < input.size(); ++s)
             if (domain.isActive(s)) input[s] = noise.voxel(domain.coordOf(s));
         grids.push_back(domain.makeGrid(input, "input"));
+    }
+    if (recipe.output.writeTangent) {
+        // Unit flow direction at each voxel centre (zero at critical points), for illuminated
+        // lines in renderers.
+        std::vector<openvdb::Vec3s> tangent(domain.slotCount(), openvdb::Vec3s(0.0f));
+        const double minSpeed = field.maxSpeed() * 1e-6;
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tangent.size()), [&](const auto& range) {
+            for (std::size_t s = range.begin(); s != range.end(); ++s) {
+                if (!domain.isActive(s)) continue;
+                openvdb::Vec3d v;
+                if (!field.sample(domain.worldOf(domain.coordOf(s)), v)) continue;
+                const double len = v.length();
+                if (len > minSpeed) tangent[s] = openvdb::Vec3s(v / len);
+            }
+        });
+        grids.push_back(domain.makeGrid<openvdb::Vec3SGrid>(tangent, "tangent"));
     }
     const double tCompose = seconds(t2);
 

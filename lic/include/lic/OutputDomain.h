@@ -91,8 +91,15 @@ public:
     /// World position of an output voxel's centre.
     openvdb::Vec3d worldOf(const openvdb::Coord& ijk) const { return mMap.toWorld(ijk.asVec3d()); }
 
-    /// Build a float grid from a per-slot array (active voxels only; leaf voxels, no tiles).
-    openvdb::FloatGrid::Ptr makeGrid(const std::vector<float>& slots, const std::string& name) const;
+    /// Build a grid from a per-slot array (active voxels only; leaf voxels, no tiles), with the
+    /// output transform. GridT is openvdb::FloatGrid (class fog volume) or openvdb::Vec3SGrid.
+    template<typename GridT>
+    typename GridT::Ptr makeGrid(const std::vector<typename GridT::ValueType>& slots,
+                                 const std::string& name) const;
+    openvdb::FloatGrid::Ptr makeGrid(const std::vector<float>& slots, const std::string& name) const
+    {
+        return makeGrid<openvdb::FloatGrid>(slots, name);
+    }
 
 private:
     int mUpsample;
