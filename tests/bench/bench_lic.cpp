@@ -27,13 +27,14 @@ Setup& setup()
     return s;
 }
 
-void bake(benchmark::State& state, lic::EngineType engine, double length)
+void bake(benchmark::State& state, lic::EngineType engine, double length, int minHits = 2)
 {
     Setup& s = setup();
     lic::LicSettings settings;
     settings.engine = engine;
     settings.length = length;
     settings.step = 0.5;
+    settings.minHits = minHits;
     lic::LicStats stats;
     for (auto _ : state) {
         lic::LicResult r = lic::convolve(s.field, s.domain, s.noise, settings);
@@ -52,6 +53,7 @@ void bake(benchmark::State& state, lic::EngineType engine, double length)
 BENCHMARK_CAPTURE(bake, naive_L20, lic::EngineType::Naive, 20.0)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK_CAPTURE(bake, fast_L10, lic::EngineType::Fast, 10.0)->Unit(benchmark::kSecond)->Iterations(3)->UseRealTime();
 BENCHMARK_CAPTURE(bake, fast_L20, lic::EngineType::Fast, 20.0)->Unit(benchmark::kSecond)->Iterations(3)->UseRealTime();
+BENCHMARK_CAPTURE(bake, fast_L20_minhits1, lic::EngineType::Fast, 20.0, 1)->Unit(benchmark::kSecond)->Iterations(3)->UseRealTime();
 BENCHMARK_CAPTURE(bake, fast_L40, lic::EngineType::Fast, 40.0)->Unit(benchmark::kSecond)->Iterations(3)->UseRealTime();
 
 BENCHMARK_MAIN();

@@ -65,10 +65,18 @@ TEST(Engine, FastMatchesNaiveOnAbcNoise)
     RecordProperty("correlation", std::to_string(c.correlation));
     std::printf("fast vs naive: correlation %.4f, mean |diff| %.4f; samples/voxel naive %.1f fast %.2f\n",
                 c.correlation, c.meanAbsDiff, naive.stats.samplesPerVoxel(), fast.stats.samplesPerVoxel());
-    // The target is 0.99; measured 0.989 (see docs/performance.md for why).
-    EXPECT_GE(c.correlation, 0.98);
+    // Measured 0.992 with the default min_hits 2 (docs/performance.md).
+    EXPECT_GE(c.correlation, 0.99);
     EXPECT_LE(c.meanAbsDiff, 0.02);
     EXPECT_LT(fast.stats.samplesPerVoxel() * 5, naive.stats.samplesPerVoxel());
+    // min_hits 1 is cheaper and a little less exact.
+    s.minHits = 1;
+    LicResult fast1 = convolve(field, domain, noise, s);
+    contrastStretch(domain, fast1.channels[0]);
+    const Compare c1 = compare(domain, naive.channels[0], fast1.channels[0]);
+    std::printf("min_hits 1: correlation %.4f, samples/voxel %.2f\n", c1.correlation, fast1.stats.samplesPerVoxel());
+    EXPECT_GE(c1.correlation, 0.985);
+    EXPECT_LT(fast1.stats.samplesPerVoxel(), fast.stats.samplesPerVoxel());
 }
 
 TEST(Engine, SeedVoxelsOfFastEqualNaive)

@@ -107,7 +107,7 @@ TEST(Recipe, DefaultsAreValidAndResolvedJsonHasEveryKey)
     EXPECT_EQ(j["output"]["contrast"], "stretch");
     EXPECT_EQ(j["input"]["halo_scale"], 2.0);
     EXPECT_EQ(j["input"]["seed"], 1);
-    EXPECT_EQ(j["lic"]["min_hits"], 1);
+    EXPECT_EQ(j["lic"]["min_hits"], 2);
     EXPECT_EQ(j["lic"]["tolerance"], 1e-3);
     EXPECT_EQ(j["lic"]["engine"], "fast");
     EXPECT_EQ(j["animation"]["frames"], 1);
@@ -165,7 +165,7 @@ TEST(Recipe, DesignExampleParses)
     EXPECT_EQ(r.lic.step, 0.5);
     EXPECT_EQ(r.lic.decay, 0.9);
     EXPECT_EQ(r.lic.integrator, "rk4");
-    EXPECT_EQ(r.lic.minHits, 1); // absent: default
+    EXPECT_EQ(r.lic.minHits, 2); // absent: default
     ASSERT_TRUE(r.width.has_value());
     EXPECT_EQ(r.width->scalar, "speed");
     EXPECT_TRUE(r.width->invert);

@@ -28,7 +28,7 @@ struct LicSettings
     double length = 20.0;    ///< kernel half-length, one direction (> 0)
     double step = 0.5;       ///< arc length between samples (> 0, ≤ length)
     double tolerance = 1e-3; ///< RK45 local error per step
-    int minHits = 1;         ///< fast: a voxel with fewer deposits seeds a new streamline
+    int minHits = 2;         ///< fast: a voxel with fewer deposits seeds its own streamline
     int threads = 0;         ///< worker threads, 0 = all cores
     /// fast: a streamline stops after this many consecutive samples in voxels that were
     /// already covered (plus the kernel half-length it needs to finish its window).

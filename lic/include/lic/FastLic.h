@@ -192,7 +192,9 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
     detail::runWithThreads(settings.threads, [&] {
         for (;;) {
             detail::checkCancel(progress);
-            // 1. Seeds: the first uncovered voxel of each tile (reads `covered` only).
+            // 1. Seeds: the next uncovered voxel of each tile in scan order (reads `covered`
+            //    only). A voxel with fewer than minHits deposits when the scan reaches it seeds
+            //    its own streamline, so min_hits > 1 trades time for more exact voxels.
             std::vector<std::int64_t> tileSeed(tiles.size(), -1);
             tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tiles.size()), [&](const auto& r) {
                 for (std::size_t t = r.begin(); t != r.end(); ++t) {
@@ -204,6 +206,7 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
                         const std::size_t slot = b * OutputDomain::kBlockVoxels + off;
                         if (domain.blockMask(b).test(off) && !covered[slot]) {
                             tileSeed[t] = std::int64_t(slot);
+                            ++tile.cursor; // each voxel seeds at most once
                             break;
                         }
                     }

@@ -83,7 +83,7 @@ struct LicSpec
     double decay = 0.9;              ///< `decay`: exp kernel factor c per step, (0, 1)
     std::string integrator = "rk4";  ///< `integrator`: "rk4" | "rk45"
     double tolerance = 1e-3;         ///< `tolerance`: rk45 error tolerance, > 0
-    int minHits = 1;                 ///< `min_hits`: fast-LIC hits before a voxel is no seed, [1, 64]
+    int minHits = 2;                 ///< `min_hits`: fast-LIC deposits before a voxel is no seed, [1, 64]
 
     bool operator==(const LicSpec&) const = default;
 };
