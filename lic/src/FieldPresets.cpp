@@ -168,7 +168,9 @@ Vec3d vortexRingVelocity(const Vec3d& p)
     constexpr double kDrift = 0.05 * kGamma / kRadius;
     const double rho = std::hypot(p.x(), p.y());
     // lambOseen(dρ, dz) returns k (-d_z, d_ρ): exactly (u_ρ, u_z).
-    const openvdb::Vec2d u = lambOseen(rho - kRadius, p.z(), kGamma, kCore);
+    // Negative circulation in the (ρ, z) plane: the ring's own flow goes +z through its middle
+    // and −z outside it, as for a ring travelling along +z (the direction of the drift).
+    const openvdb::Vec2d u = lambOseen(rho - kRadius, p.z(), -kGamma, kCore);
     const double ex = rho > 0.0 ? p.x() / rho : 0.0;
     const double ey = rho > 0.0 ? p.y() / rho : 0.0;
     return {u[0] * ex, u[0] * ey, u[1] + kDrift};

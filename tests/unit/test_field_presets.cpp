@@ -268,14 +268,15 @@ TEST(FieldPresets, VortexRingSwirlsAroundCoreAndDriftsOnAxis)
 {
     const auto field = lic::makePresetField("vortex-ring", Coord(41));
     const openvdb::tools::GridSampler<openvdb::Vec3SGrid, openvdb::tools::BoxSampler> s(*field.velocity);
-    // On the axis (ρ = 0, z = 0) the in-plane velocity vanishes; u_z = -Γ/(2πR)(1-e^{-R²/a²}) + 0.1.
+    // On the axis (ρ = 0, z = 0) the in-plane velocity vanishes; the ring's induced flow through
+    // its middle points +z, with the drift: u_z = Γ/(2πR)(1-e^{-R²/a²}) + 0.1.
     const Vec3d axis = s.wsSample(Vec3d(0.0));
     EXPECT_NEAR(axis.x(), 0.0, 1e-5);
     EXPECT_NEAR(axis.y(), 0.0, 1e-5);
-    const double expectedZ = -1.0 / (2 * std::numbers::pi * 0.5) * (1 - std::exp(-0.25 / 0.0225)) + 0.1;
+    const double expectedZ = 1.0 / (2 * std::numbers::pi * 0.5) * (1 - std::exp(-0.25 / 0.0225)) + 0.1;
     EXPECT_NEAR(axis.z(), expectedZ, 1e-4);
-    // High on the axis the core's swirl has weakened and the +z drift wins.
-    EXPECT_GT(s.wsSample(Vec3d(0.0, 0.0, 0.95)).z(), 0.0);
+    // Outside the ring, in its plane, the flow returns along −z.
+    EXPECT_LT(s.wsSample(Vec3d(0.75, 0.0, 0.0)).z(), 0.0);
 }
 
 // ---- tabbed jet --------------------------------------------------------------------------
