@@ -14,11 +14,12 @@ import pyopenvdb as vdb
 
 
 def write_png(path, img):
-    h, w = img.shape
+    h, w = img.shape[:2]
+    colour = img.ndim == 3
     raw = b"".join(b"\x00" + img[y].tobytes() for y in range(h))
     def chunk(tag, data):
         return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
-    png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+    png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2 if colour else 0, 0, 0, 0))
     png += chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b"")
     with open(path, "wb") as f:
         f.write(png)
@@ -32,6 +33,8 @@ def main():
     ap.add_argument("--axis", choices="xyz", default="z")
     ap.add_argument("--index", type=int, default=None, help="slice index (default: middle)")
     ap.add_argument("--scale", type=int, default=2, help="pixel repeat factor")
+    ap.add_argument("--color", action="store_true",
+                    help="multiply density by the vec3 `color` grid (scene-linear) and write sRGB")
     a = ap.parse_args()
     grid = vdb.read(a.vdb, a.grid)
     lo, hi = grid.evalActiveVoxelBoundingBox()
@@ -41,7 +44,15 @@ def main():
     ax = "xyz".index(a.axis)
     idx = dims[ax] // 2 if a.index is None else a.index - lo[ax]
     sl = np.take(arr, idx, axis=ax)
-    img = (np.clip(sl, 0, 1) * 255 + 0.5).astype(np.uint8).T[::-1]
+    if a.color:
+        cgrid = vdb.read(a.vdb, "color")
+        carr = np.zeros(dims + (3,), dtype=np.float32)
+        cgrid.copyToArray(carr, ijk=lo)
+        lin = np.clip(np.take(carr, idx, axis=ax) * sl[..., None], 0, 1)
+        enc = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * np.power(lin, 1 / 2.4) - 0.055)
+        img = (enc * 255 + 0.5).astype(np.uint8).transpose(1, 0, 2)[::-1]
+    else:
+        img = (np.clip(sl, 0, 1) * 255 + 0.5).astype(np.uint8).T[::-1]
     img = np.repeat(np.repeat(img, a.scale, axis=0), a.scale, axis=1)
     write_png(a.png, np.ascontiguousarray(img))
     print(a.png)

@@ -416,6 +416,69 @@ TEST_F(CliTest, WriteTangentAddsUnitFlowDirection)
     EXPECT_EQ(checked, 200);
 }
 
+TEST_F(CliTest, ColourByFileScalarWritesColorScalarAndRamp)
+{
+    // tabbed-jet's `temperature` is hottest on the jet axis: `scalar` must be higher there.
+    const fs::path field = makeField("jet.vdb", "tabbed-jet", "20,20,30");
+    const fs::path recipe = work("c.json");
+    writeText(recipe, R"({"color": {"scalar": "temperature", "colormap": "red-yellow", "range": [300, 360]}})");
+    const fs::path out = work("lic.vdb");
+    const RunResult r = bake(field, out, {"--recipe", recipe.string(), "--quiet"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    auto grids = readAll(out);
+    ASSERT_TRUE(grids.count("color") && grids.count("scalar")) << r.describe();
+    auto color = openvdb::gridPtrCast<openvdb::Vec3SGrid>(grids["color"]);
+    auto scalar = openvdb::gridPtrCast<openvdb::FloatGrid>(grids["scalar"]);
+    auto density = readFloat(out, "density");
+    ASSERT_TRUE(color && scalar && density);
+    EXPECT_TRUE(color->tree().hasSameTopology(density->tree()));
+    EXPECT_TRUE(scalar->tree().hasSameTopology(density->tree()));
+    expectUnitRange(*scalar);
+    const auto bb = density->evalActiveVoxelBoundingBox();
+    const openvdb::Coord mid((bb.min()[0] + bb.max()[0]) / 2, (bb.min()[1] + bb.max()[1]) / 2, bb.min()[2] + 2);
+    const openvdb::Coord edge(bb.min()[0], bb.min()[1], bb.min()[2] + 2);
+    EXPECT_GT(scalar->tree().getValue(mid), scalar->tree().getValue(edge) + 0.5f);
+    // red-yellow in scene-linear: the hot axis is yellower (more green) than the cool edge.
+    EXPECT_GT(color->tree().getValue(mid)[1], color->tree().getValue(edge)[1]);
+    // Metadata and manifest carry the ramp for renderers.
+    EXPECT_EQ(density->metaValue<std::string>("lic_colormap"), "red-yellow");
+    EXPECT_EQ(density->metaValue<std::string>("lic_color_scalar"), "temperature");
+    const json m = json::parse(readText(work("lic.json")));
+    EXPECT_EQ(m["colormap"]["name"], "red-yellow");
+    EXPECT_EQ(m["colormap"]["range"][0], 300.0);
+    EXPECT_EQ(m["colormap"]["range"][1], 360.0);
+    EXPECT_GE(m["colormap"]["points"].size(), 2u);
+}
+
+TEST_F(CliTest, ColourByDerivedVorticityWithCsvLut)
+{
+    const fs::path field = makeField("rot.vdb", "rotation", "12,12,12");
+    const fs::path lut = work("lut.csv");
+    writeText(lut, "# value,r,g,b\n0,0,0,0\n1,255,255,255\n");
+    const fs::path recipe = work("v.json");
+    writeText(recipe, json{{"color", {{"scalar", "vorticity"}, {"colormap", lut.string()}}}}.dump());
+    const fs::path out = work("lic.vdb");
+    const RunResult r = bake(field, out, {"--recipe", recipe.string(), "--quiet"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    auto density = readFloat(out, "density");
+    ASSERT_TRUE(density);
+    // Solid-body rotation: vorticity 2 everywhere, so the automatic range is degenerate and the
+    // bake must still succeed with a constant scalar.
+    const auto range = density->metaValue<openvdb::Vec2d>("lic_color_range");
+    EXPECT_NEAR(range[0], 2.0, 1e-3);
+
+    // Unknown scalar and colormap: exit 2, named.
+    writeText(recipe, R"({"color": {"scalar": "enstrophy"}})");
+    const RunResult bad = bake(field, work("bad.vdb"), {"--recipe", recipe.string()});
+    EXPECT_EQ(bad.code, 2) << bad.describe();
+    EXPECT_NE(bad.err.find("enstrophy"), std::string::npos) << bad.describe();
+    EXPECT_FALSE(fs::exists(work("bad.vdb")));
+    writeText(recipe, R"({"color": {"scalar": "speed", "colormap": "jet"}})");
+    const RunResult bad2 = bake(field, work("bad2.vdb"), {"--recipe", recipe.string()});
+    EXPECT_EQ(bad2.code, 2) << bad2.describe();
+    EXPECT_NE(bad2.err.find("viridis"), std::string::npos) << bad2.describe();
+}
+
 TEST_F(CliTest, RecipeSetsLengthAndFlagOverrides)
 {
     const fs::path field = makeField("abc.vdb");

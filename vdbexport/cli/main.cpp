@@ -115,6 +115,11 @@ int main(int argc, char** argv)
     auto* oUpsample = bake->add_option("--upsample", cli.output.upsample, "Output voxels per field voxel [2]");
     auto* oSeed = bake->add_option("--seed", cli.input.seed, "Noise seed [1]");
     auto* oContrast = bake->add_option("--contrast", cli.output.contrast, "stretch|none [stretch]");
+    std::string colorScalar, colormap;
+    bake->add_option("--color", colorScalar,
+                     "Colour by a scalar: speed, vorticity, streamwise-vorticity, helicity, q-criterion, or a float grid of the field file");
+    auto* oColormap = bake->add_option("--colormap", colormap,
+                                       "heated-object|red-yellow|grey-purple|viridis|magma|inferno|cividis|coolwarm or a value,r,g,b .csv [viridis]");
     auto* oFrames = bake->add_option("--frames", cli.animation.frames, "Frames of a cyclic animation [1]");
     bool writeInput = false, writeTangent = false;
     auto* oWriteInput = bake->add_flag("--write-input", writeInput, "Also write the input texture as grid `input`");
@@ -126,7 +131,8 @@ int main(int argc, char** argv)
         "  licvdb field tabbed-jet --out jet.vdb\n"
         "  licvdb bake --field jet.vdb --out jet_lic.vdb\n"
         "  licvdb bake --field abc.vdb --out abc_lic.vdb --length 40 --step 0.5 --json\n"
-        "  licvdb bake --recipe examples/recipes/tabbed-jet.json --threads 2\n");
+        "  licvdb bake --recipe examples/recipes/tabbed-jet.json --threads 2\n"
+        "  licvdb bake --field jet.vdb --out jet_vort.vdb --color vorticity --colormap heated-object\n");
 
     // info -------------------------------------------------------------------------------------
     Common infoCommon;
@@ -222,6 +228,14 @@ int main(int argc, char** argv)
             if (oSeed->count()) r.input.seed = cli.input.seed;
             if (oContrast->count()) r.output.contrast = cli.output.contrast;
             if (oFrames->count()) r.animation.frames = cli.animation.frames;
+            if (!colorScalar.empty()) {
+                if (!r.color) r.color = vdbexport::ColorSpec{};
+                r.color->scalar = colorScalar;
+            }
+            if (oColormap->count()) {
+                if (!r.color) throw lic::InputError("--colormap needs a colour scalar: add --color SCALAR");
+                r.color->colormap = colormap;
+            }
             if (oWriteInput->count()) r.output.writeInput = true;
             if (oWriteTangent->count()) r.output.writeTangent = true;
             if (bake->get_option("--threads")->count()) r.threads = bakeCommon.threads;

@@ -2,17 +2,24 @@
 
 #include "vdbexport/VdbIO.h"
 
+#include "lic/Colormap.h"
 #include "lic/Contrast.h"
 #include "lic/Engine.h"
 #include "lic/Error.h"
 #include "lic/Noise.h"
+#include "lic/Scalars.h"
+
+#include <openvdb/tools/Interpolation.h>
 
 #include <openvdb/openvdb.h>
 
 #include <tbb/parallel_for.h>
 
 #include <chrono>
+#include <algorithm>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 
 namespace vdbexport {
 
@@ -42,7 +49,6 @@ void checkSupported(const Recipe& r)
     requireNotYet(r.input.type != "noise", "input.type (--input) \"" + r.input.type + "\"");
     requireNotYet(r.roi.has_value(), "roi");
     requireNotYet(r.width.has_value(), "width");
-    requireNotYet(r.color.has_value(), "color");
     requireNotYet(r.lic.kernel != "box", "lic.kernel (--kernel) \"" + r.lic.kernel + "\"");
     requireNotYet(r.lic.engine == "splat", "lic.engine \"splat\"");
     requireNotYet(r.animation.frames != 1, "animation.frames (--frames) > 1");
@@ -73,6 +79,59 @@ openvdb::BBoxd worldBBoxOf(const openvdb::GridBase& grid)
     const openvdb::CoordBBox ib = grid.evalActiveVoxelBoundingBox();
     return grid.transform().indexToWorld(
         openvdb::BBoxd(ib.min().asVec3d() - openvdb::Vec3d(0.5), ib.max().asVec3d() + openvdb::Vec3d(0.5)));
+}
+
+lic::Colormap loadColormap(const std::string& spec)
+{
+    if (fs::path(spec).extension() != ".csv") return lic::Colormap::named(spec);
+    std::ifstream in(spec);
+    if (!in) throw lic::InputError("colormap LUT file \"" + spec + "\" cannot be read");
+    std::stringstream text;
+    text << in.rdbuf();
+    return lic::Colormap::fromCsv(text.str(), spec);
+}
+
+/// The colour scalar sampled trilinearly at every active output voxel centre. Positions are
+/// clamped to the scalar's active bounding box (as the velocity sampler does), so the outer half
+/// voxel repeats the edge value instead of blending with the background.
+std::vector<float> sampleScalar(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain)
+{
+    std::vector<float> out(domain.slotCount(), 0.0f);
+    const openvdb::CoordBBox bb = scalar.evalActiveVoxelBoundingBox();
+    const openvdb::Vec3d lo = bb.min().asVec3d(), hi = bb.max().asVec3d();
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, domain.blockCount()), [&](const auto& r) {
+        const auto acc = scalar.getConstAccessor();
+        for (std::size_t b = r.begin(); b != r.end(); ++b) {
+            const auto& mask = domain.blockMask(b);
+            for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off)) {
+                const std::size_t s = b * lic::OutputDomain::kBlockVoxels + off;
+                openvdb::Vec3d idx = scalar.worldToIndex(domain.worldOf(domain.coordOf(s)));
+                for (int a = 0; a < 3; ++a) idx[a] = std::clamp(idx[a], lo[a], hi[a]);
+                float v = 0.0f;
+                openvdb::tools::BoxSampler::sample(acc, idx, v);
+                out[s] = v;
+            }
+        }
+    });
+    return out;
+}
+
+/// Robust automatic range: the 1st and 99th percentiles over active voxels.
+std::array<double, 2> autoRange(const std::vector<float>& values, const lic::OutputDomain& domain)
+{
+    std::vector<float> v;
+    v.reserve(domain.activeVoxelCount());
+    for (std::size_t s = 0; s < values.size(); ++s)
+        if (domain.isActive(s) && std::isfinite(values[s])) v.push_back(values[s]);
+    if (v.empty()) return {0.0, 1.0};
+    auto pct = [&](double q) {
+        const std::size_t k = std::min(v.size() - 1, std::size_t(q * double(v.size() - 1) + 0.5));
+        std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(k), v.end());
+        return double(v[k]);
+    };
+    double lo = pct(0.01), hi = pct(0.99);
+    if (!(hi > lo)) hi = lo + 1.0; // constant scalar: everything maps to the low end
+    return {lo, hi};
 }
 
 } // namespace
@@ -156,6 +215,33 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
         });
         grids.push_back(domain.makeGrid<openvdb::Vec3SGrid>(tangent, "tangent"));
     }
+    nlohmann::json colorJson = nullptr;
+    if (recipe.color) {
+        const lic::Colormap cmap = loadColormap(recipe.color->colormap);
+        const auto fileScalars = readScalarGrids(recipe.field.path);
+        const openvdb::FloatGrid::ConstPtr scalarGrid = lic::resolveScalar(*grid, fileScalars, recipe.color->scalar);
+        std::vector<float> values = sampleScalar(*scalarGrid, domain);
+        const std::array<double, 2> range = recipe.color->range ? *recipe.color->range : autoRange(values, domain);
+        std::vector<openvdb::Vec3s> color(domain.slotCount(), openvdb::Vec3s(0.0f));
+        const double inv = 1.0 / (range[1] - range[0]);
+        for (std::size_t s = 0; s < values.size(); ++s) {
+            if (!domain.isActive(s)) continue;
+            const double t = std::clamp((double(values[s]) - range[0]) * inv, 0.0, 1.0);
+            values[s] = float(t);
+            color[s] = openvdb::Vec3s(cmap.linear(t));
+        }
+        grids.push_back(domain.makeGrid<openvdb::Vec3SGrid>(color, "color"));
+        grids.back()->setVectorType(openvdb::VEC_INVARIANT);
+        grids.back()->insertMeta("licvdb_color_space", openvdb::StringMetadata("scene-linear Rec.709"));
+        grids.push_back(domain.makeGrid(values, "scalar"));
+        densityGrid->insertMeta("lic_color_scalar", openvdb::StringMetadata(recipe.color->scalar));
+        densityGrid->insertMeta("lic_colormap", openvdb::StringMetadata(cmap.name()));
+        densityGrid->insertMeta("lic_color_range", openvdb::Vec2DMetadata(openvdb::Vec2d(range[0], range[1])));
+        nlohmann::json points = nlohmann::json::array();
+        for (const auto& [pos, c] : cmap.points()) points.push_back({pos, c[0], c[1], c[2]});
+        colorJson = {{"scalar", recipe.color->scalar}, {"name", cmap.name()}, {"range", {range[0], range[1]}},
+                     {"space", "sRGB"}, {"points", points}};
+    }
     const double tCompose = seconds(t2);
 
     // 5. Manifest and files (the VDB first: a manifest never points at a missing file).
@@ -167,8 +253,8 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
     manifest["cyclic"] = false;
     manifest["files"] = {fs::path(recipe.output.path).filename().string()};
     manifest["voxel_size"] = domain.voxelSize();
-    manifest["colormap"] = nullptr;
-    manifest["range"] = nullptr;
+    manifest["colormap"] = colorJson;
+    manifest["range"] = colorJson.is_null() ? nlohmann::json(nullptr) : colorJson["range"];
     manifest["grids"] = nlohmann::json::array();
     for (const auto& g : grids) {
         const openvdb::Vec3d vs = g->voxelSize();
