@@ -16,7 +16,7 @@ using openvdb::Coord;
 using openvdb::Mat3d;
 using openvdb::Vec3d;
 
-enum class Derived { Speed, Vorticity, StreamwiseVorticity, Helicity, QCriterion };
+enum class Derived { Speed, Vorticity, StreamwiseVorticity, Helicity, QCriterion, Lambda2 };
 
 std::string joined(const std::vector<std::string>& names)
 {
@@ -88,6 +88,33 @@ Mat3d worldJacobian(CentredVelocity& vel, const openvdb::math::MapBase& map, con
     return J;
 }
 
+/// Jeong & Hussain's λ2: the middle eigenvalue of S² + Ω² (symmetric), by the closed-form
+/// trigonometric solution for 3×3 symmetric matrices. λ2 < 0 inside a vortex core.
+double lambda2(const Mat3d& J)
+{
+    Mat3d S, W;
+    for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) {
+            S[a][b] = 0.5 * (J[a][b] + J[b][a]);
+            W[a][b] = 0.5 * (J[a][b] - J[b][a]);
+        }
+    const Mat3d M = S * S + W * W;
+    const double p1 = M[0][1] * M[0][1] + M[0][2] * M[0][2] + M[1][2] * M[1][2];
+    const double q = (M[0][0] + M[1][1] + M[2][2]) / 3.0;
+    const double p2 = (M[0][0] - q) * (M[0][0] - q) + (M[1][1] - q) * (M[1][1] - q) +
+                      (M[2][2] - q) * (M[2][2] - q) + 2.0 * p1;
+    if (p2 <= 1e-30 * (1.0 + q * q)) return q; // isotropic: all eigenvalues equal
+    const double p = std::sqrt(p2 / 6.0);
+    Mat3d B = M;
+    for (int a = 0; a < 3; ++a) B[a][a] -= q;
+    B *= 1.0 / p;
+    const double r = std::clamp(B.det() / 2.0, -1.0, 1.0);
+    const double phi = std::acos(r) / 3.0;
+    const double largest = q + 2.0 * p * std::cos(phi);
+    const double smallest = q + 2.0 * p * std::cos(phi + 2.0 * M_PI / 3.0);
+    return 3.0 * q - largest - smallest;
+}
+
 double evaluate(Derived kind, const Vec3d& v, const Mat3d& J)
 {
     const Vec3d omega(J[2][1] - J[1][2], J[0][2] - J[2][0], J[1][0] - J[0][1]);
@@ -106,6 +133,7 @@ double evaluate(Derived kind, const Vec3d& v, const Mat3d& J)
             for (int b = 0; b < 3; ++b) trJ2 += J[a][b] * J[b][a];
         return -0.5 * trJ2;
     }
+    case Derived::Lambda2: return lambda2(J);
     }
     return 0.0;
 }
@@ -116,7 +144,7 @@ const std::vector<std::string>& derivedScalarNames()
 {
     // Order matches enum Derived.
     static const std::vector<std::string> names = {"speed", "vorticity", "streamwise-vorticity",
-                                                   "helicity", "q-criterion"};
+                                                   "helicity", "q-criterion", "lambda2"};
     return names;
 }
 

@@ -62,7 +62,7 @@ double linearQ()
 TEST(Scalars, NamesAreStable)
 {
     const std::vector<std::string> expected = {"speed", "vorticity", "streamwise-vorticity",
-                                               "helicity", "q-criterion"};
+                                               "helicity", "q-criterion", "lambda2"};
     EXPECT_EQ(lic::derivedScalarNames(), expected);
 }
 
@@ -85,6 +85,7 @@ TEST(Scalars, SolidBodyRotation)
     check("helicity", [](const Vec3d&) { return 0.0; });
     check("streamwise-vorticity", [](const Vec3d&) { return 0.0; });
     check("q-criterion", [](const Vec3d&) { return 1.0; });
+    check("lambda2", [](const Vec3d&) { return -1.0; }); // S = 0, Ω² = diag(−1, −1, 0)
     check("speed", [](const Vec3d& p) { return std::hypot(p[0], p[1]); });
 }
 
@@ -145,6 +146,22 @@ TEST(Scalars, UniformFlow)
             EXPECT_NEAR(value, expected, 1e-6) << name << " at " << ijk;
         });
     }
+}
+
+// λ2 of a pure strain v = (x, y, −2z): S = diag(1, 1, −2), Ω = 0, S² = diag(1, 1, 4) → λ2 = 1.
+// A rotation plus a strain along the axis, v = (−y, x, 0) + (0, 0, z)·0.5 − (x, y, 0)·0.25:
+// S = diag(−¼, −¼, ½), Ω² = diag(−1, −1, 0) → S² + Ω² = diag(−15/16, −15/16, ¼) → λ2 = −15/16.
+TEST(Scalars, Lambda2ClosedForms)
+{
+    const auto strain = lictest::makeField(Coord(9), 0.25, Vec3d(-1.0),
+                                           [](const Vec3d& p) { return Vec3d(p[0], p[1], -2.0 * p[2]); });
+    const auto vortex = lictest::makeField(Coord(9), 0.25, Vec3d(-1.0), [](const Vec3d& p) {
+        return Vec3d(-p[1] - 0.25 * p[0], p[0] - 0.25 * p[1], 0.5 * p[2]);
+    });
+    forEachActive(*lic::deriveScalar(*strain, "lambda2"),
+                  [](const Coord& ijk, const Vec3d&, double v) { EXPECT_NEAR(v, 1.0, 1e-4) << ijk; });
+    forEachActive(*lic::deriveScalar(*vortex, "lambda2"),
+                  [](const Coord& ijk, const Vec3d&, double v) { EXPECT_NEAR(v, -15.0 / 16.0, 1e-4) << ijk; });
 }
 
 // Voxel size 0.37 and an offset origin: derivatives are in world units. A linear flow has exact

@@ -117,7 +117,7 @@ int main(int argc, char** argv)
     auto* oContrast = bake->add_option("--contrast", cli.output.contrast, "stretch|none [stretch]");
     std::string colorScalar, colormap;
     bake->add_option("--color", colorScalar,
-                     "Colour by a scalar: speed, vorticity, streamwise-vorticity, helicity, q-criterion, or a float grid of the field file");
+                     "Colour by a scalar: speed, vorticity, streamwise-vorticity, helicity, q-criterion, lambda2, or a float grid of the field file");
     auto* oColormap = bake->add_option("--colormap", colormap,
                                        "heated-object|red-yellow|grey-purple|viridis|magma|inferno|cividis|coolwarm or a value,r,g,b .csv [viridis]");
     auto* oFrames = bake->add_option("--frames", cli.animation.frames, "Frames of a cyclic animation [1]");

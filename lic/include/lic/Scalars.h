@@ -17,7 +17,9 @@ namespace lic {
 /// - "helicity": v·ω (world units / time²);
 /// - "q-criterion": Q = ½(‖Ω‖² − ‖S‖²) with S and Ω the symmetric and antisymmetric parts of the
 ///   velocity gradient ∇v and ‖·‖ the Frobenius norm (1 / time²). Q > 0 where rotation dominates
-///   strain; solid-body rotation at angular speed w has Q = w².
+///   strain; solid-body rotation at angular speed w has Q = w²;
+/// - "lambda2": λ2 of Jeong & Hussain, the middle eigenvalue of S² + Ω² (1 / time²); negative in
+///   vortex cores (solid-body rotation at w: −w²).
 const std::vector<std::string>& derivedScalarNames();
 
 /// Compute the derived scalar @a name on the velocity grid's own voxels.
