@@ -17,6 +17,15 @@ EngineType engineFromString(const std::string& s)
     throw InputError("engine \"" + s + "\" is unknown; expected naive or fast");
 }
 
+const char* toString(KernelType k) { return k == KernelType::Exp ? "exp" : "box"; }
+
+KernelType kernelFromString(const std::string& s)
+{
+    if (s == "box") return KernelType::Box;
+    if (s == "exp") return KernelType::Exp;
+    throw InputError("kernel \"" + s + "\" is unknown; expected box or exp");
+}
+
 int LicSettings::halfSamples() const
 {
     return std::max(1, int(std::lround(length / step)));
@@ -34,6 +43,7 @@ void LicSettings::validate() const
     if (step > length) fail("step", step, "<= length (" + std::to_string(length) + ")");
     if (length / step > 1e6) fail("length/step", length / step, "at most 1e6 samples per direction");
     if (!(tolerance > 0)) fail("tolerance", tolerance, "> 0");
+    if (kernel == KernelType::Exp && !(decay > 0 && decay < 1)) fail("decay", decay, "in (0, 1)");
     if (minHits < 1 || minHits > 64) fail("min_hits", minHits, "1..64");
     if (threads < 0) fail("threads", threads, ">= 0 (0 = all cores)");
     if (coveredRun < 1) fail("covered run", coveredRun, ">= 1");
@@ -54,6 +64,34 @@ TraceSettings traceSettings(const VelocityField& field, const OutputDomain& doma
     ts.maxStep = std::max(ts.step, 2.0 * vs);
     ts.minSpeed = field.maxSpeed() * 1e-6;
     return ts;
+}
+
+void windowSums(KernelType kernel, double decay, int n, std::size_t N, int W, const double* vals,
+                double* win, double* norm, std::vector<double>& scratch)
+{
+    const std::size_t nn = std::size_t(n);
+    if (kernel == KernelType::Box) {
+        scratch.assign((N + 1) * std::size_t(W), 0.0); // prefix sums
+        for (std::size_t i = 0; i < N; ++i)
+            for (int c = 0; c < W; ++c) scratch[(i + 1) * W + c] = scratch[i * W + c] + vals[i * W + c];
+        for (std::size_t i = 0; i < N; ++i) {
+            const std::size_t a = i >= nn ? i - nn : 0, b = std::min(N - 1, i + nn);
+            for (int c = 0; c < W; ++c) win[i * W + c] = scratch[(b + 1) * W + c] - scratch[a * W + c];
+            norm[i] = double(b - a + 1);
+        }
+        return;
+    }
+    scratch.assign((N + 1) * std::size_t(W), 0.0); // E_i, with E_N = 0
+    for (std::size_t i = N; i-- > 0;)
+        for (int c = 0; c < W; ++c) scratch[i * W + c] = vals[i * W + c] + decay * scratch[(i + 1) * W + c];
+    const double cn1 = std::pow(decay, double(n + 1));
+    for (std::size_t i = 0; i < N; ++i) {
+        const std::size_t end = i + nn + 1; // first sample past the window
+        for (int c = 0; c < W; ++c)
+            win[i * W + c] = scratch[i * W + c] - (end < N ? cn1 * scratch[end * W + c] : 0.0);
+        const double K = double(std::min(nn, N - 1 - i)); // window is samples i … i+K
+        norm[i] = (1.0 - std::pow(decay, K + 1.0)) / (1.0 - decay);
+    }
 }
 
 std::vector<FastTile> makeFastTiles(const OutputDomain& domain)

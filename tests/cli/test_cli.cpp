@@ -479,6 +479,23 @@ TEST_F(CliTest, ColourByDerivedVorticityWithCsvLut)
     EXPECT_NE(bad2.err.find("viridis"), std::string::npos) << bad2.describe();
 }
 
+TEST_F(CliTest, OrientedExpKernel)
+{
+    const fs::path field = makeField("abc.vdb");
+    const fs::path out = work("exp.vdb");
+    const RunResult r = bake(field, out, {"--kernel", "exp", "--decay", "0.8", "--quiet"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    auto density = readFloat(out, "density");
+    ASSERT_TRUE(density);
+    expectUnitRange(*density);
+    EXPECT_EQ(density->metaValue<std::string>("lic_kernel"), "exp");
+    EXPECT_FLOAT_EQ(density->metaValue<float>("lic_decay"), 0.8f);
+    const RunResult bad = bake(field, work("bad.vdb"), {"--kernel", "exp", "--decay", "1"});
+    EXPECT_EQ(bad.code, 2) << bad.describe();
+    EXPECT_NE(bad.err.find("decay"), std::string::npos) << bad.describe();
+    EXPECT_FALSE(fs::exists(work("bad.vdb")));
+}
+
 TEST_F(CliTest, RecipeSetsLengthAndFlagOverrides)
 {
     const fs::path field = makeField("abc.vdb");

@@ -106,7 +106,8 @@ int main(int argc, char** argv)
     auto* oInput = bake->add_option("--input", cli.input.type, "Input texture: noise (spots: later)");
     auto* oFilter = bake->add_option("--noise-filter", cli.input.noiseFilter, "Noise reconstruction: binomial|none [binomial]");
     auto* oEngine = bake->add_option("--engine", cli.lic.engine, "naive|fast [fast]");
-    auto* oKernel = bake->add_option("--kernel", cli.lic.kernel, "box [box]");
+    auto* oKernel = bake->add_option("--kernel", cli.lic.kernel, "box|exp (oriented streamlets, bright head downstream) [box]");
+    auto* oDecay = bake->add_option("--decay", cli.lic.decay, "exp kernel: weight ratio of consecutive samples, (0,1) [0.9]");
     auto* oLength = bake->add_option("--length", cli.lic.length, "Kernel half-length, output voxels [20]");
     auto* oStep = bake->add_option("--step", cli.lic.step, "Sample spacing along streamlines, output voxels [0.5]");
     auto* oIntegrator = bake->add_option("--integrator", cli.lic.integrator, "rk4|rk45 [rk4]");
@@ -219,6 +220,7 @@ int main(int argc, char** argv)
             if (oFilter->count()) r.input.noiseFilter = cli.input.noiseFilter;
             if (oEngine->count()) r.lic.engine = cli.lic.engine;
             if (oKernel->count()) r.lic.kernel = cli.lic.kernel;
+            if (oDecay->count()) r.lic.decay = cli.lic.decay;
             if (oLength->count()) r.lic.length = cli.lic.length;
             if (oStep->count()) r.lic.step = cli.lic.step;
             if (oIntegrator->count()) r.lic.integrator = cli.lic.integrator;

@@ -49,7 +49,6 @@ void checkSupported(const Recipe& r)
     requireNotYet(r.input.type != "noise", "input.type (--input) \"" + r.input.type + "\"");
     requireNotYet(r.roi.has_value(), "roi");
     requireNotYet(r.width.has_value(), "width");
-    requireNotYet(r.lic.kernel != "box", "lic.kernel (--kernel) \"" + r.lic.kernel + "\"");
     requireNotYet(r.lic.engine == "splat", "lic.engine \"splat\"");
     requireNotYet(r.animation.frames != 1, "animation.frames (--frames) > 1");
     requireNotYet(r.output.writeSeries, "output.write_series");
@@ -151,6 +150,8 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
     lic::LicSettings settings;
     settings.engine = lic::engineFromString(recipe.lic.engine);
     settings.integrator = lic::integratorFromString(recipe.lic.integrator);
+    settings.kernel = lic::kernelFromString(recipe.lic.kernel);
+    settings.decay = recipe.lic.decay;
     settings.length = recipe.lic.length;
     settings.step = recipe.lic.step;
     settings.tolerance = recipe.lic.tolerance;
@@ -189,6 +190,10 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
     densityGrid->insertMeta("lic_kernel", openvdb::StringMetadata(recipe.lic.kernel));
     densityGrid->insertMeta("lic_length", openvdb::FloatMetadata(float(recipe.lic.length)));
     densityGrid->insertMeta("lic_step", openvdb::FloatMetadata(float(recipe.lic.step)));
+    if (settings.kernel == lic::KernelType::Exp) {
+        densityGrid->insertMeta("lic_decay", openvdb::FloatMetadata(float(recipe.lic.decay)));
+        densityGrid->insertMeta("lic_orientation", openvdb::StringMetadata("bright head downstream"));
+    }
     densityGrid->insertMeta("lic_frames", openvdb::Int32Metadata(1));
     densityGrid->insertMeta("lic_frame", openvdb::Int32Metadata(1));
     densityGrid->insertMeta("lic_cyclic", openvdb::BoolMetadata(false));

@@ -20,11 +20,21 @@ const char* toString(EngineType);
 /// @throw lic::InputError for names other than "naive" and "fast".
 EngineType engineFromString(const std::string&);
 
+enum class KernelType {
+    Box, ///< uniform weights over n samples each way
+    Exp  ///< oriented: weights c^k over the n samples downstream (seed §7); bright heads point downstream
+};
+const char* toString(KernelType);
+/// @throw lic::InputError for names other than "box" and "exp".
+KernelType kernelFromString(const std::string&);
+
 /// What to convolve and how. Lengths are in OUTPUT VOXELS (the smallest edge of an output voxel).
 struct LicSettings
 {
     EngineType engine = EngineType::Fast;
     Integrator integrator = Integrator::RK4;
+    KernelType kernel = KernelType::Box;
+    double decay = 0.9;      ///< exp kernel: weight ratio c of consecutive samples, in (0, 1)
     double length = 20.0;    ///< kernel half-length, one direction (> 0)
     double step = 0.5;       ///< arc length between samples (> 0, ≤ length)
     double tolerance = 1e-3; ///< RK45 local error per step
@@ -71,6 +81,14 @@ LicResult convolve(const VelocityField& field, const OutputDomain& domain, const
                    const LicSettings& settings, Progress& progress = nullProgress());
 
 namespace detail {
+/// Kernel-weighted window sums along one streamline of N samples with W values each (row-major
+/// `vals`): `win` (N × W) gets each sample's weighted sum, `norm` (N) its total weight.
+/// Box: samples i−n … i+n, clamped to the line. Exp: Σ_{k=0..n} c^k v_{i+k}, clamped, from the
+/// backward recurrence E_i = v_i + c·E_{i+1}, sum_i = E_i − c^{n+1}·E_{i+n+1}: it only ever
+/// multiplies by c < 1, so it does not drift however long the line (the forward recurrence of
+/// the seed paper divides by c and does).
+void windowSums(KernelType kernel, double decay, int n, std::size_t N, int W, const double* vals,
+                double* win, double* norm, std::vector<double>& scratch);
 /// World-space tracing parameters for a domain and settings; `maxSamples` = the kernel's.
 TraceSettings traceSettings(const VelocityField& field, const OutputDomain& domain,
                             const LicSettings& settings);

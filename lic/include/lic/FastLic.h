@@ -88,7 +88,7 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
         std::vector<Vec3d> idxF, idxB;            // output-index position per sample
         std::vector<Vec3d> idx;                   // output-index positions, assembled
         std::vector<std::int64_t> slot;           // slots, assembled
-        std::vector<double> prefix;               // prefix sums, (N + 1) × C
+        std::vector<double> vals, win, norm, scratch; // samples, window sums, kernel weights
         std::vector<std::int64_t> touched;        // slots deposited into this round
     };
     tbb::enumerable_thread_specific<Line> tls;
@@ -143,23 +143,27 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
         }
         // Per sample: C values, then 3·C gradient components (output-index units).
         constexpr int W = 4 * C;
-        L.prefix.assign((N + 1) * W, 0.0);
+        L.vals.resize(N * W);
+        L.win.resize(N * W);
+        L.norm.resize(N);
         float v[W];
         for (std::size_t i = 0; i < N; ++i) {
             texture.sampleGradient(L.idx[i], v, v + C);
-            for (int c = 0; c < W; ++c) L.prefix[(i + 1) * W + c] = L.prefix[i * W + c] + v[c];
+            for (int c = 0; c < W; ++c) L.vals[i * W + c] = v[c];
         }
+        detail::windowSums(settings.kernel, settings.decay, n, N, W, L.vals.data(), L.win.data(),
+                           L.norm.data(), L.scratch);
         // Samples whose window runs past an artificial end (length limit, early stop) are not
-        // deposited; near a natural end the window is truncated exactly as in naiveLic().
-        const std::size_t lo = bwdNatural ? 0 : std::min(B, std::size_t(n));
+        // deposited; near a natural end the window is truncated exactly as in naiveLic(). The exp
+        // kernel only looks downstream, so the upstream end never cuts a window.
+        const bool oriented = settings.kernel == KernelType::Exp;
+        const std::size_t lo = (bwdNatural || oriented) ? 0 : std::min(B, std::size_t(n));
         const std::size_t hi = fwdNatural ? N - 1 : std::max(B, N - 1 - std::size_t(n));
         std::uint64_t dep = 0;
         for (std::size_t i = lo; i <= hi; ++i) {
             const std::int64_t s = L.slot[i];
             if (s < 0) continue;
-            const std::size_t a = i >= std::size_t(n) ? i - n : 0;
-            const std::size_t b = std::min(N - 1, i + std::size_t(n));
-            const double inv = 1.0 / double(b - a + 1);
+            const double inv = 1.0 / L.norm[i];
             // First-order correction from the sample point to the voxel centre: the window
             // average of the texture gradient applied to the offset δ (the streamline through the
             // centre is, to first order, this one shifted by δ). Deposits are weighted by
@@ -168,12 +172,10 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
             const double r2 = 1.0 + off.lengthSqr() * detail::kDepositFalloff;
             const double w = 1.0 / (r2 * r2);
             const std::int64_t wq = std::max<std::int64_t>(1, std::llround(w * detail::kWeightScale));
-            const double* P1 = &L.prefix[(b + 1) * W];
-            const double* P0 = &L.prefix[a * W];
+            const double* Wi = &L.win[i * W];
             for (int c = 0; c < C; ++c) {
-                const double g0 = P1[C + 3 * c] - P0[C + 3 * c], g1 = P1[C + 3 * c + 1] - P0[C + 3 * c + 1],
-                             g2 = P1[C + 3 * c + 2] - P0[C + 3 * c + 2];
-                const double avg = (P1[c] - P0[c] + g0 * off[0] + g1 * off[1] + g2 * off[2]) * inv;
+                const double* g = Wi + C + 3 * c;
+                const double avg = (Wi[c] + g[0] * off[0] + g[1] * off[1] + g[2] * off[2]) * inv;
                 std::atomic_ref<std::int64_t>(acc[std::size_t(s)].sum[c])
                     .fetch_add(std::llround(avg * double(wq)), std::memory_order_relaxed);
             }

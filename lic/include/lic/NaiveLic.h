@@ -29,6 +29,7 @@ LicResult naiveLic(const VelocityField& field, const OutputDomain& domain, const
     LicResult result;
     result.channels.assign(C, std::vector<float>(domain.slotCount(), 0.0f));
     std::atomic<std::uint64_t> samples{0};
+    const bool oriented = settings.kernel == KernelType::Exp;
 
     progress.begin("naive LIC", domain.activeVoxelCount());
     detail::runWithThreads(settings.threads, [&] {
@@ -45,17 +46,20 @@ LicResult naiveLic(const VelocityField& field, const OutputDomain& domain, const
                     const openvdb::Vec3d seed = domain.worldOf(ijk);
                     line.clear();
                     traceStreamline(field, seed, +1.0, ts, line);
-                    traceStreamline(field, seed, -1.0, ts, line);
-                    double sum[C] = {};
+                    if (!oriented) traceStreamline(field, seed, -1.0, ts, line);
+                    // Box: equal weights both ways. Exp: weight c^k at the k-th sample downstream.
+                    double sum[C] = {}, weight = 1.0, total = 0.0;
                     float v[C];
                     texture.sample(ijk.asVec3d(), v);
                     for (int c = 0; c < C; ++c) sum[c] += v[c];
+                    total += 1.0;
                     for (const openvdb::Vec3d& p : line) {
+                        weight = oriented ? weight * settings.decay : 1.0;
                         texture.sample(domain.map().toIndex(p), v);
-                        for (int c = 0; c < C; ++c) sum[c] += v[c];
+                        for (int c = 0; c < C; ++c) sum[c] += weight * v[c];
+                        total += weight;
                     }
-                    const double count = double(line.size() + 1);
-                    for (int c = 0; c < C; ++c) result.channels[c][slot] = float(sum[c] / count);
+                    for (int c = 0; c < C; ++c) result.channels[c][slot] = float(sum[c] / total);
                     localSamples += line.size() + 1;
                 }
                 progress.advance(mask.count());
