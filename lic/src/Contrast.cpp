@@ -50,7 +50,13 @@ ChannelStats channelStats(const OutputDomain& domain, const std::vector<float>& 
 ChannelStats contrastStretch(const OutputDomain& domain, std::vector<float>& slots, double sigmas)
 {
     const ChannelStats s = channelStats(domain, slots);
-    if (s.stddev < 1e-6) return s;
+    applyContrast(domain, slots, s, sigmas);
+    return s;
+}
+
+void applyContrast(const OutputDomain& domain, std::vector<float>& slots, const ChannelStats& s, double sigmas)
+{
+    if (s.stddev < 1e-6) return;
     const double lo = s.mean - sigmas * s.stddev;
     const double scale = 1.0 / (2.0 * sigmas * s.stddev);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, slots.size()), [&](const auto& r) {
@@ -59,7 +65,6 @@ ChannelStats contrastStretch(const OutputDomain& domain, std::vector<float>& slo
             slots[i] = float(std::clamp((double(slots[i]) - lo) * scale, 0.0, 1.0));
         }
     });
-    return s;
 }
 
 } // namespace lic

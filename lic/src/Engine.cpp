@@ -44,6 +44,9 @@ void LicSettings::validate() const
     if (length / step > 1e6) fail("length/step", length / step, "at most 1e6 samples per direction");
     if (!(tolerance > 0)) fail("tolerance", tolerance, "> 0");
     if (kernel == KernelType::Exp && !(decay > 0 && decay < 1)) fail("decay", decay, "in (0, 1)");
+    if (ripple && kernel != KernelType::Box) {
+        throw InputError("cyclic animation (frames > 1) needs the box kernel; the exp kernel is not animated yet");
+    }
     if (minHits < 1 || minHits > 64) fail("min_hits", minHits, "1..64");
     if (threads < 0) fail("threads", threads, ">= 0 (0 = all cores)");
     if (coveredRun < 1) fail("covered run", coveredRun, ">= 1");

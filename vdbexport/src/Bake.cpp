@@ -2,6 +2,7 @@
 
 #include "vdbexport/VdbIO.h"
 
+#include "lic/Animation.h"
 #include "lic/Colormap.h"
 #include "lic/Contrast.h"
 #include "lic/Engine.h"
@@ -24,6 +25,17 @@
 namespace vdbexport {
 
 namespace fs = std::filesystem;
+
+std::string framePath(const std::string& vdbPath, int frame, int frames)
+{
+    if (frames <= 1) return vdbPath;
+    fs::path p(vdbPath);
+    char suffix[16];
+    std::snprintf(suffix, sizeof suffix, "_%04d", frame);
+    const std::string ext = p.extension() == ".vdb" ? ".vdb" : "";
+    const fs::path stem = ext.empty() ? p.filename() : p.stem();
+    return (p.parent_path() / (stem.string() + suffix + ".vdb")).string();
+}
 
 std::string manifestPath(const std::string& vdbPath)
 {
@@ -50,7 +62,6 @@ void checkSupported(const Recipe& r)
     requireNotYet(r.roi.has_value(), "roi");
     requireNotYet(r.width.has_value(), "width");
     requireNotYet(r.lic.engine == "splat", "lic.engine \"splat\"");
-    requireNotYet(r.animation.frames != 1, "animation.frames (--frames) > 1");
     requireNotYet(r.output.writeSeries, "output.write_series");
 }
 
@@ -157,6 +168,8 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
     settings.tolerance = recipe.lic.tolerance;
     settings.minHits = recipe.lic.minHits;
     settings.threads = recipe.threads;
+    const int frames = recipe.animation.frames;
+    settings.ripple = frames > 1;
     settings.validate();
 
     // 1. Field.
@@ -175,29 +188,38 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
 
     // 3. Contrast.
     const auto t2 = Clock::now();
-    std::vector<float>& density = result.channels[0];
-    const lic::ChannelStats raw = recipe.output.contrast == "stretch"
-                                      ? lic::contrastStretch(domain, density)
-                                      : lic::channelStats(domain, density);
+    // Frame f of a loop (or the still); every frame gets frame 1's contrast mapping, so the
+    // loop does not flicker.
+    const bool stretch = recipe.output.contrast == "stretch";
+    auto frameDensity = [&](int f) {
+        return frames > 1 ? lic::composeFrame(result, 1, 0, f, frames) : result.channels[0];
+    };
+    std::vector<float> density = frameDensity(1);
+    const lic::ChannelStats raw = stretch ? lic::contrastStretch(domain, density) : lic::channelStats(domain, density);
 
     // 4. Grids and metadata.
     const nlohmann::json resolved = recipe.toJson();
-    openvdb::FloatGrid::Ptr densityGrid = domain.makeGrid(density, "density");
-    densityGrid->insertMeta("licvdb_version", openvdb::StringMetadata(LICVDB_VERSION));
-    densityGrid->insertMeta("licvdb_recipe", openvdb::StringMetadata(resolved.dump()));
-    densityGrid->insertMeta("licvdb_field_grid", openvdb::StringMetadata(gridName));
-    densityGrid->insertMeta("lic_engine", openvdb::StringMetadata(recipe.lic.engine));
-    densityGrid->insertMeta("lic_kernel", openvdb::StringMetadata(recipe.lic.kernel));
-    densityGrid->insertMeta("lic_length", openvdb::FloatMetadata(float(recipe.lic.length)));
-    densityGrid->insertMeta("lic_step", openvdb::FloatMetadata(float(recipe.lic.step)));
+    openvdb::MetaMap densityMeta; // on `density` of every frame
+    densityMeta.insertMeta("licvdb_version", openvdb::StringMetadata(LICVDB_VERSION));
+    densityMeta.insertMeta("licvdb_recipe", openvdb::StringMetadata(resolved.dump()));
+    densityMeta.insertMeta("licvdb_field_grid", openvdb::StringMetadata(gridName));
+    densityMeta.insertMeta("lic_engine", openvdb::StringMetadata(recipe.lic.engine));
+    densityMeta.insertMeta("lic_kernel", openvdb::StringMetadata(recipe.lic.kernel));
+    densityMeta.insertMeta("lic_length", openvdb::FloatMetadata(float(recipe.lic.length)));
+    densityMeta.insertMeta("lic_step", openvdb::FloatMetadata(float(recipe.lic.step)));
     if (settings.kernel == lic::KernelType::Exp) {
-        densityGrid->insertMeta("lic_decay", openvdb::FloatMetadata(float(recipe.lic.decay)));
-        densityGrid->insertMeta("lic_orientation", openvdb::StringMetadata("bright head downstream"));
+        densityMeta.insertMeta("lic_decay", openvdb::FloatMetadata(float(recipe.lic.decay)));
+        densityMeta.insertMeta("lic_orientation", openvdb::StringMetadata("bright head downstream"));
     }
-    densityGrid->insertMeta("lic_frames", openvdb::Int32Metadata(1));
-    densityGrid->insertMeta("lic_frame", openvdb::Int32Metadata(1));
-    densityGrid->insertMeta("lic_cyclic", openvdb::BoolMetadata(false));
-    openvdb::GridPtrVec grids{densityGrid};
+    densityMeta.insertMeta("lic_frames", openvdb::Int32Metadata(frames));
+    densityMeta.insertMeta("lic_cyclic", openvdb::BoolMetadata(frames > 1));
+    auto makeDensity = [&](const std::vector<float>& values, int frame) {
+        openvdb::FloatGrid::Ptr g = domain.makeGrid(values, "density");
+        for (auto it = densityMeta.beginMeta(); it != densityMeta.endMeta(); ++it) g->insertMeta(it->first, *it->second);
+        g->insertMeta("lic_frame", openvdb::Int32Metadata(frame));
+        return g;
+    };
+    openvdb::GridPtrVec grids; // grids shared by every frame (density is added per frame)
     if (recipe.output.writeInput) {
         std::vector<float> input(domain.slotCount(), 0.0f);
         for (std::size_t s = 0; s < input.size(); ++s)
@@ -239,9 +261,9 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
         grids.back()->setVectorType(openvdb::VEC_INVARIANT);
         grids.back()->insertMeta("licvdb_color_space", openvdb::StringMetadata("scene-linear Rec.709"));
         grids.push_back(domain.makeGrid(values, "scalar"));
-        densityGrid->insertMeta("lic_color_scalar", openvdb::StringMetadata(recipe.color->scalar));
-        densityGrid->insertMeta("lic_colormap", openvdb::StringMetadata(cmap.name()));
-        densityGrid->insertMeta("lic_color_range", openvdb::Vec2DMetadata(openvdb::Vec2d(range[0], range[1])));
+        densityMeta.insertMeta("lic_color_scalar", openvdb::StringMetadata(recipe.color->scalar));
+        densityMeta.insertMeta("lic_colormap", openvdb::StringMetadata(cmap.name()));
+        densityMeta.insertMeta("lic_color_range", openvdb::Vec2DMetadata(openvdb::Vec2d(range[0], range[1])));
         nlohmann::json points = nlohmann::json::array();
         for (const auto& [pos, c] : cmap.points()) points.push_back({pos, c[0], c[1], c[2]});
         colorJson = {{"scalar", recipe.color->scalar}, {"name", cmap.name()}, {"range", {range[0], range[1]}},
@@ -249,19 +271,40 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
     }
     const double tCompose = seconds(t2);
 
-    // 5. Manifest and files (the VDB first: a manifest never points at a missing file).
+    // 5. Files, then the manifest (a manifest never points at a missing file). A loop is written
+    // as OUT_0001.vdb … OUT_NNNN.vdb; if any frame fails, the frames already written are removed.
     const auto t3 = Clock::now();
+    std::vector<std::string> paths;
+    for (int f = 1; f <= frames; ++f) paths.push_back(framePath(recipe.output.path, f, frames));
+    openvdb::GridPtrVec firstGrids;
+    try {
+        for (int f = 1; f <= frames; ++f) {
+            std::vector<float> d = f == 1 ? density : frameDensity(f);
+            if (f > 1 && stretch) lic::applyContrast(domain, d, raw);
+            openvdb::GridPtrVec fileGrids{makeDensity(d, f)};
+            fileGrids.insert(fileGrids.end(), grids.begin(), grids.end());
+            if (f == 1) firstGrids = fileGrids;
+            writeVdbAtomic(paths[std::size_t(f - 1)], fileGrids);
+        }
+    } catch (...) {
+        for (const auto& p : paths) {
+            std::error_code ec;
+            fs::remove(p, ec);
+        }
+        throw;
+    }
     nlohmann::json manifest;
     manifest["licvdb_version"] = LICVDB_VERSION;
     manifest["recipe"] = resolved;
-    manifest["frames"] = 1;
-    manifest["cyclic"] = false;
-    manifest["files"] = {fs::path(recipe.output.path).filename().string()};
+    manifest["frames"] = frames;
+    manifest["cyclic"] = frames > 1;
+    manifest["files"] = nlohmann::json::array();
+    for (const auto& p : paths) manifest["files"].push_back(fs::path(p).filename().string());
     manifest["voxel_size"] = domain.voxelSize();
     manifest["colormap"] = colorJson;
     manifest["range"] = colorJson.is_null() ? nlohmann::json(nullptr) : colorJson["range"];
     manifest["grids"] = nlohmann::json::array();
-    for (const auto& g : grids) {
+    for (const auto& g : firstGrids) {
         const openvdb::Vec3d vs = g->voxelSize();
         manifest["grids"].push_back({{"name", g->getName()},
                                      {"type", g->valueType()},
@@ -269,13 +312,14 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
                                      {"voxel_size", {vs[0], vs[1], vs[2]}},
                                      {"world_bbox", bboxJson(worldBBoxOf(*g))}});
     }
-    writeVdbAtomic(recipe.output.path, grids);
     writeTextAtomic(manifestPath(recipe.output.path), manifest.dump(2) + "\n");
     const double tWrite = seconds(t3);
 
     const lic::LicStats& st = result.stats;
     return {
         {"output", recipe.output.path},
+        {"files", paths},
+        {"frames", frames},
         {"manifest", manifestPath(recipe.output.path)},
         {"field", {{"path", recipe.field.path}, {"grid", gridName},
                    {"active_voxels", field.activeVoxelCount()}, {"world_bbox", bboxJson(field.worldBBox())}}},

@@ -23,4 +23,9 @@ ChannelStats channelStats(const OutputDomain& domain, const std::vector<float>& 
 ChannelStats contrastStretch(const OutputDomain& domain, std::vector<float>& slots,
                              double sigmas = 2.5);
 
+/// Apply the stretch of `stats` (from contrastStretch on another frame) to `slots`, so every frame
+/// of a loop shares one mapping.
+void applyContrast(const OutputDomain& domain, std::vector<float>& slots, const ChannelStats& stats,
+                   double sigmas = 2.5);
+
 } // namespace lic

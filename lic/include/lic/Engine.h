@@ -35,6 +35,9 @@ struct LicSettings
     Integrator integrator = Integrator::RK4;
     KernelType kernel = KernelType::Box;
     double decay = 0.9;      ///< exp kernel: weight ratio c of consecutive samples, in (0, 1)
+    /// Also produce the ripple sums a cyclic animation is composed from (box kernel only; see
+    /// Animation.h). The result then has 3·C + 2 channels.
+    bool ripple = false;
     double length = 20.0;    ///< kernel half-length, one direction (> 0)
     double step = 0.5;       ///< arc length between samples (> 0, ≤ length)
     double tolerance = 1e-3; ///< RK45 local error per step
@@ -106,6 +109,11 @@ LicResult convolve(const VelocityField& field, const OutputDomain& domain, const
                    const LicSettings& settings, Progress& progress)
 {
     settings.validate();
+    if (settings.ripple) {
+        return settings.engine == EngineType::Naive
+                   ? naiveLic<Texture, true>(field, domain, texture, settings, progress)
+                   : fastLic<Texture, true>(field, domain, texture, settings, progress);
+    }
     return settings.engine == EngineType::Naive
                ? naiveLic(field, domain, texture, settings, progress)
                : fastLic(field, domain, texture, settings, progress);

@@ -31,6 +31,9 @@ namespace lic {
 
 namespace detail {
 
+/// Ripple phase step per sample: one period over the 2n+1 samples of a box window.
+inline double rippleStep(int n) { return 2.0 * 3.14159265358979323846 / double(2 * n + 1); }
+
 /// Fixed-point scale of deposit weights: 2^30. A deposit adds round(w·2^30) to the voxel's
 /// weight and round(value·w·2^30) to its sum; int64 holds ~2^33 full-weight deposits of 1.0.
 constexpr double kWeightScale = 1073741824.0;
@@ -54,14 +57,18 @@ std::vector<FastTile> makeFastTiles(const OutputDomain& domain);
 /// Fast-LIC with a box kernel of n = settings.halfSamples() samples each way. Gives the same
 /// value as naiveLic() at every streamline's seed voxel, and window averages at points within
 /// half a voxel of the centre elsewhere.
-template<typename Texture>
+template<typename Texture, bool Ripple = false>
 LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const Texture& texture,
                   const LicSettings& settings, Progress& progress)
 {
     using openvdb::Vec3d;
     constexpr int C = Texture::kChannels;
+    // Output channels: the box average per texture channel; with Ripple (cyclic animation) also
+    // the complex ripple sums Z/N per channel and the ripple weight sum NZ/N (see Animation.h).
+    constexpr int K = Ripple ? 3 * C + 2 : C;
     const auto start = std::chrono::steady_clock::now();
     const int n = settings.halfSamples();
+    const double theta = detail::rippleStep(n);
     TraceSettings ts = detail::traceSettings(field, domain, settings);
     // Long streamlines amortise the 2n samples each one spends filling its window.
     const double maxLen = settings.maxStreamline > 0 ? settings.maxStreamline
@@ -74,7 +81,7 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
     struct Acc
     {
         std::int64_t weight; // Σ deposit weights, fixed point
-        std::int64_t sum[C]; // Σ weight · value, fixed point
+        std::int64_t sum[K]; // Σ weight · value, fixed point
         std::uint32_t hits;  // number of deposits
     };
     std::vector<Acc> acc(nSlots, Acc{});
@@ -141,15 +148,27 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
             L.idx[B + 1 + i] = L.idxF[i];
             L.slot[B + 1 + i] = L.slotF[i];
         }
-        // Per sample: C values, then 3·C gradient components (output-index units).
-        constexpr int W = 4 * C;
+        // Per sample: C values, then 3·C gradient components (output-index units). With Ripple
+        // the same again times cos θ_j and times sin θ_j, then cos θ_j and sin θ_j themselves.
+        constexpr int P = 4 * C;
+        constexpr int W = Ripple ? 3 * P + 2 : P;
         L.vals.resize(N * W);
         L.win.resize(N * W);
         L.norm.resize(N);
-        float v[W];
+        float v[P];
         for (std::size_t i = 0; i < N; ++i) {
             texture.sampleGradient(L.idx[i], v, v + C);
-            for (int c = 0; c < W; ++c) L.vals[i * W + c] = v[c];
+            double* out = &L.vals[i * W];
+            for (int c = 0; c < P; ++c) out[c] = v[c];
+            if constexpr (Ripple) {
+                const double cs = std::cos(theta * double(i)), sn = std::sin(theta * double(i));
+                for (int c = 0; c < P; ++c) {
+                    out[P + c] = v[c] * cs;
+                    out[2 * P + c] = v[c] * sn;
+                }
+                out[3 * P] = cs;
+                out[3 * P + 1] = sn;
+            }
         }
         detail::windowSums(settings.kernel, settings.decay, n, N, W, L.vals.data(), L.win.data(),
                            L.norm.data(), L.scratch);
@@ -173,11 +192,30 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
             const double w = 1.0 / (r2 * r2);
             const std::int64_t wq = std::max<std::int64_t>(1, std::llround(w * detail::kWeightScale));
             const double* Wi = &L.win[i * W];
+            double out[K];
             for (int c = 0; c < C; ++c) {
                 const double* g = Wi + C + 3 * c;
-                const double avg = (Wi[c] + g[0] * off[0] + g[1] * off[1] + g[2] * off[2]) * inv;
-                std::atomic_ref<std::int64_t>(acc[std::size_t(s)].sum[c])
-                    .fetch_add(std::llround(avg * double(wq)), std::memory_order_relaxed);
+                out[c] = (Wi[c] + g[0] * off[0] + g[1] * off[1] + g[2] * off[2]) * inv;
+            }
+            if constexpr (Ripple) {
+                // Window sums relative to sample i: rotate Σ_j x_j e^{iθj} by e^{−iθi}.
+                const double cs = std::cos(theta * double(i)), sn = std::sin(theta * double(i));
+                const double* Rc = Wi + P;
+                const double* Rs = Wi + 2 * P;
+                auto re = [&](int k) { return Rc[k] * cs + Rs[k] * sn; };
+                auto im = [&](int k) { return Rs[k] * cs - Rc[k] * sn; };
+                for (int c = 0; c < C; ++c) {
+                    const int g = C + 3 * c;
+                    out[C + c] = (re(c) + re(g) * off[0] + re(g + 1) * off[1] + re(g + 2) * off[2]) * inv;
+                    out[2 * C + c] = (im(c) + im(g) * off[0] + im(g + 1) * off[1] + im(g + 2) * off[2]) * inv;
+                }
+                const double nc = Wi[3 * P], ns = Wi[3 * P + 1];
+                out[3 * C] = (nc * cs + ns * sn) * inv;
+                out[3 * C + 1] = (ns * cs - nc * sn) * inv;
+            }
+            for (int k = 0; k < K; ++k) {
+                std::atomic_ref<std::int64_t>(acc[std::size_t(s)].sum[k])
+                    .fetch_add(std::llround(out[k] * double(wq)), std::memory_order_relaxed);
             }
             std::atomic_ref<std::int64_t>(acc[std::size_t(s)].weight).fetch_add(wq, std::memory_order_relaxed);
             std::atomic_ref<std::uint32_t>(acc[std::size_t(s)].hits).fetch_add(1, std::memory_order_relaxed);
@@ -246,12 +284,12 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
     progress.end();
 
     LicResult result;
-    result.channels.assign(C, std::vector<float>(nSlots, 0.0f));
+    result.channels.assign(K, std::vector<float>(nSlots, 0.0f));
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nSlots), [&](const auto& r) {
         for (std::size_t s = r.begin(); s != r.end(); ++s) {
             if (acc[s].hits == 0) continue;
             const double inv = 1.0 / double(acc[s].weight);
-            for (int c = 0; c < C; ++c) result.channels[c][s] = float(double(acc[s].sum[c]) * inv);
+            for (int k = 0; k < K; ++k) result.channels[k][s] = float(double(acc[s].sum[k]) * inv);
         }
     });
     result.stats.voxels = domain.activeVoxelCount();

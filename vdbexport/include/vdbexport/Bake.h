@@ -11,7 +11,11 @@
 
 namespace vdbexport {
 
-/// The sidecar manifest path of a bake: OUT.vdb → OUT.json.
+/// The file of frame `frame` (1-based) of a bake of `frames` frames: OUT.vdb itself for a still,
+/// OUT_0001.vdb … for a loop (1-based, 4 digits).
+std::string framePath(const std::string& vdbPath, int frame, int frames);
+
+/// The sidecar manifest path of a bake: OUT.vdb → OUT.json (one for a whole loop).
 std::string manifestPath(const std::string& vdbPath);
 
 /// Run the bake described by `recipe` (validated here, paths included): read the field, convolve,

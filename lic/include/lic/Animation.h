@@ -1,0 +1,41 @@
+// Seamless cyclic animation of steady flow from one trace: the periodic ripple kernel.
+#pragma once
+
+#include "lic/Engine.h"
+
+#include <cmath>
+#include <vector>
+
+namespace lic {
+
+/// Ripple depth α of the frame kernel w_f(k) = 1 + α·cos(θk + 2π(f−1)/N), k the signed sample
+/// offset (downstream positive), θ = 2π/(2n+1) (one ripple per box window).
+/// α < 1 keeps every weight positive, so truncated windows never divide by ~0.
+constexpr double kRippleDepth = 0.8;
+
+/// Frame f (1-based) of N for texture channel c, per slot, from a ripple LicResult (3·C + 2
+/// channels: A, Re Z, Im Z per channel, then Re N, Im N; all divided by the sample count):
+///   I_f = (A + α·Re(e^{−iφ_f} Z)) / (1 + α·Re(e^{−iφ_f} N)),  φ_f = −2π(f−1)/N,
+/// i.e. weights 1 + α·cos(θk + 2π(f−1)/N): the weight's crest moves upstream (to smaller k) as f
+/// grows, so each voxel sees texture from further upstream and the pattern moves DOWNSTREAM,
+/// (2n+1)·step/N output voxels per frame (tested on `uniform`). Frame N+1 equals frame 1.
+inline std::vector<float> composeFrame(const LicResult& r, int channels, int c, int f, int frames)
+{
+    const double phi = -2.0 * 3.14159265358979323846 * double(f - 1) / double(frames);
+    const double cp = std::cos(phi), sp = std::sin(phi);
+    const auto& A = r.channels[std::size_t(c)];
+    const auto& Zr = r.channels[std::size_t(channels + c)];
+    const auto& Zi = r.channels[std::size_t(2 * channels + c)];
+    const auto& Nr = r.channels[std::size_t(3 * channels)];
+    const auto& Ni = r.channels[std::size_t(3 * channels + 1)];
+    std::vector<float> out(A.size(), 0.0f);
+    for (std::size_t s = 0; s < A.size(); ++s) {
+        // Re(e^{−iφ}(x + iy)) = x cos φ + y sin φ
+        const double num = A[s] + kRippleDepth * (Zr[s] * cp + Zi[s] * sp);
+        const double den = 1.0 + kRippleDepth * (Nr[s] * cp + Ni[s] * sp);
+        out[s] = den > 0 ? float(num / den) : 0.0f;
+    }
+    return out;
+}
+
+} // namespace lic
