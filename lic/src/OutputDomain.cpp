@@ -46,18 +46,20 @@ OutputDomain::OutputDomain(const VelocityField& field, int upsample)
     for (int a = 0; a < 3; ++a) mBlockDim[a] = blockMax[a] - mBlockMin[a] + 1;
     const std::size_t nBlocks = std::size_t(mBlockDim[0]) * mBlockDim[1] * mBlockDim[2];
 
+    auto originOf = [&](std::size_t b) {
+        const int bx = int(b / (std::size_t(mBlockDim[1]) * mBlockDim[2]));
+        const int by = int((b / mBlockDim[2]) % mBlockDim[1]);
+        const int bz = int(b % mBlockDim[2]);
+        return openvdb::Coord((mBlockMin[0] + bx) << kLog2Block, (mBlockMin[1] + by) << kLog2Block,
+                              (mBlockMin[2] + bz) << kLog2Block);
+    };
     // Activity of every candidate block, in parallel; then number the active blocks in order.
     std::vector<Mask> masks(nBlocks);
     const openvdb::Vec3SGrid& grid = field.grid();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nBlocks), [&](const auto& r) {
         auto acc = grid.getConstAccessor();
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
-            const int bx = int(b / (std::size_t(mBlockDim[1]) * mBlockDim[2]));
-            const int by = int((b / mBlockDim[2]) % mBlockDim[1]);
-            const int bz = int(b % mBlockDim[2]);
-            const openvdb::Coord origin((mBlockMin[0] + bx) << kLog2Block,
-                                        (mBlockMin[1] + by) << kLog2Block,
-                                        (mBlockMin[2] + bz) << kLog2Block);
+            const openvdb::Coord origin = originOf(b);
             for (int off = 0; off < kBlockVoxels; ++off) {
                 const openvdb::Coord ijk = origin + openvdb::Coord(off >> 6, (off >> 3) & 7, off & 7);
                 if (!mBBox.isInside(ijk)) continue;
@@ -69,12 +71,8 @@ OutputDomain::OutputDomain(const VelocityField& field, int upsample)
     mBlockTable.assign(nBlocks, -1);
     for (std::size_t b = 0; b < nBlocks; ++b) {
         if (masks[b].none()) continue;
-        const int bx = int(b / (std::size_t(mBlockDim[1]) * mBlockDim[2]));
-        const int by = int((b / mBlockDim[2]) % mBlockDim[1]);
-        const int bz = int(b % mBlockDim[2]);
         mBlockTable[b] = std::int64_t(mBlockOrigins.size());
-        mBlockOrigins.emplace_back((mBlockMin[0] + bx) << kLog2Block, (mBlockMin[1] + by) << kLog2Block,
-                                   (mBlockMin[2] + bz) << kLog2Block);
+        mBlockOrigins.push_back(originOf(b));
         mMasks.push_back(masks[b]);
         mActiveVoxels += masks[b].count();
     }

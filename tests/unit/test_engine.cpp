@@ -15,6 +15,30 @@ using namespace lic;
 
 namespace {
 
+/// Pearson correlation of a[s] with b[s + shift] over active voxels whose shifted voxel is active.
+double correlation(const OutputDomain& d, const std::vector<float>& a, const std::vector<float>& b,
+                   const openvdb::Coord& shift = openvdb::Coord(0))
+{
+    double sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0, n = 0;
+    for (std::size_t s = 0; s < a.size(); ++s) {
+        if (!d.isActive(s)) continue;
+        const std::int64_t t = shift == openvdb::Coord(0) ? std::int64_t(s) : d.slotOf(d.coordOf(s) + shift);
+        if (t < 0) continue;
+        const double x = a[s], y = b[std::size_t(t)];
+        sa += x, sb += y, saa += x * x, sbb += y * y, sab += x * y, n += 1;
+    }
+    const double ca = saa / n - (sa / n) * (sa / n), cb = sbb / n - (sb / n) * (sb / n);
+    return (sab / n - sa / n * sb / n) / std::sqrt(ca * cb);
+}
+
+double meanAbsDiff(const OutputDomain& d, const std::vector<float>& a, const std::vector<float>& b)
+{
+    double s = 0, n = 0;
+    for (std::size_t i = 0; i < a.size(); ++i)
+        if (d.isActive(i)) s += std::abs(double(a[i]) - b[i]), n += 1;
+    return s / n;
+}
+
 struct Compare
 {
     double correlation = 0, meanAbsDiff = 0;
@@ -22,29 +46,7 @@ struct Compare
 
 Compare compare(const OutputDomain& d, const std::vector<float>& a, const std::vector<float>& b)
 {
-    double sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0, mad = 0, n = 0;
-    for (std::size_t s = 0; s < a.size(); ++s) {
-        if (!d.isActive(s)) continue;
-        sa += a[s], sb += b[s], saa += double(a[s]) * a[s], sbb += double(b[s]) * b[s];
-        sab += double(a[s]) * b[s], mad += std::abs(double(a[s]) - b[s]), n += 1;
-    }
-    const double ca = saa / n - (sa / n) * (sa / n), cb = sbb / n - (sb / n) * (sb / n);
-    return {(sab / n - sa / n * sb / n) / std::sqrt(ca * cb), mad / n};
-}
-
-/// Correlation of a channel with itself shifted by `shift` output voxels.
-double shiftCorrelation(const OutputDomain& d, const std::vector<float>& v, const openvdb::Coord& shift)
-{
-    double sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0, n = 0;
-    for (std::size_t s = 0; s < v.size(); ++s) {
-        if (!d.isActive(s)) continue;
-        const std::int64_t t = d.slotOf(d.coordOf(s) + shift);
-        if (t < 0) continue;
-        const double a = v[s], b = v[std::size_t(t)];
-        sa += a, sb += b, saa += a * a, sbb += b * b, sab += a * b, n += 1;
-    }
-    const double ca = saa / n - (sa / n) * (sa / n), cb = sbb / n - (sb / n) * (sb / n);
-    return (sab / n - sa / n * sb / n) / std::sqrt(ca * cb);
+    return {correlation(d, a, b), meanAbsDiff(d, a, b)};
 }
 
 } // namespace
@@ -135,8 +137,8 @@ TEST(Engine, OutputIsFlowAligned)
     OutputDomain ud(uni, 2);
     NoiseTexture un(3, ud.indexBBox());
     LicResult ur = convolve(uni, ud, un, s);
-    const double cAlong = shiftCorrelation(ud, ur.channels[0], openvdb::Coord(3, 0, 0));
-    const double cAcross = shiftCorrelation(ud, ur.channels[0], openvdb::Coord(0, 3, 0));
+    const double cAlong = correlation(ud, ur.channels[0], ur.channels[0], openvdb::Coord(3, 0, 0));
+    const double cAcross = correlation(ud, ur.channels[0], ur.channels[0], openvdb::Coord(0, 3, 0));
     std::printf("uniform: correlation at 3 voxels along %.3f, across %.3f\n", cAlong, cAcross);
     EXPECT_GT(cAlong, 0.8);
     EXPECT_LT(cAcross, 0.2);
@@ -330,13 +332,6 @@ double meanOver(const OutputDomain& d, const std::vector<float>& v)
         if (d.isActive(i)) s += v[i], n += 1;
     return s / n;
 }
-double meanAbsDiff(const OutputDomain& d, const std::vector<float>& a, const std::vector<float>& b)
-{
-    double s = 0, n = 0;
-    for (std::size_t i = 0; i < a.size(); ++i)
-        if (d.isActive(i)) s += std::abs(double(a[i]) - b[i]), n += 1;
-    return s / n;
-}
 } // namespace
 
 TEST(Animation, LoopIsSeamlessSteadyAndMovesDownstream)
@@ -372,17 +367,7 @@ TEST(Animation, LoopIsSeamlessSteadyAndMovesDownstream)
         int best = 0;
         double bestC = -2;
         for (int d = -4; d <= 4; ++d) {
-            std::vector<float> shifted(frames[0].size(), 0.0f);
-            double sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0, n = 0;
-            for (std::size_t i = 0; i < frames[0].size(); ++i) {
-                if (!domain.isActive(i)) continue;
-                const std::int64_t t = domain.slotOf(domain.coordOf(i) + openvdb::Coord(d, 0, 0));
-                if (t < 0) continue;
-                const double a = frames[0][i], b = frames[1][std::size_t(t)];
-                sa += a, sb += b, saa += a * a, sbb += b * b, sab += a * b, n += 1;
-            }
-            const double c = (sab / n - sa / n * sb / n) /
-                             std::sqrt((saa / n - sa / n * sa / n) * (sbb / n - sb / n * sb / n));
+            const double c = correlation(domain, frames[0], frames[1], openvdb::Coord(d, 0, 0));
             if (c > bestC) bestC = c, best = d;
         }
         std::printf("%s: consecutive-frame diff %.4f, frame N vs 1 %.4f, best shift %d (corr %.3f)\n",

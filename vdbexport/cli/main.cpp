@@ -151,13 +151,7 @@ int main(int argc, char** argv)
 
     try {
         app.parse(argc, argv);
-    } catch (const CLI::CallForHelp& e) {
-        return app.exit(e);
-    } catch (const CLI::CallForAllHelp& e) {
-        return app.exit(e);
-    } catch (const CLI::CallForVersion& e) {
-        return app.exit(e);
-    } catch (const CLI::ParseError& e) {
+    } catch (const CLI::ParseError& e) { // also --help and --version, which exit 0
         const int code = app.exit(e);
         if (code != 0) std::cerr << "see `licvdb help` or `licvdb help COMMAND`\n";
         return code == 0 ? 0 : 2;

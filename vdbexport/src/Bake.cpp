@@ -245,7 +245,11 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
     nlohmann::json colorJson = nullptr;
     if (recipe.color) {
         const lic::Colormap cmap = loadColormap(recipe.color->colormap);
-        const auto fileScalars = readScalarGrids(recipe.field.path);
+        // Derived scalars need no second read of the field file.
+        const auto& derived = lic::derivedScalarNames();
+        const bool isDerived = std::find(derived.begin(), derived.end(), recipe.color->scalar) != derived.end();
+        const auto fileScalars = isDerived ? std::map<std::string, openvdb::FloatGrid::Ptr>{}
+                                           : readScalarGrids(recipe.field.path);
         const openvdb::FloatGrid::ConstPtr scalarGrid = lic::resolveScalar(*grid, fileScalars, recipe.color->scalar);
         std::vector<float> values = sampleScalar(*scalarGrid, domain);
         const std::array<double, 2> range = recipe.color->range ? *recipe.color->range : autoRange(values, domain);

@@ -84,6 +84,10 @@ LicResult convolve(const VelocityField& field, const OutputDomain& domain, const
                    const LicSettings& settings, Progress& progress = nullProgress());
 
 namespace detail {
+/// Ripple phase step per sample (cyclic animation): one period over the 2n+1 samples of a box
+/// window.
+inline double rippleStep(int n) { return 2.0 * 3.14159265358979323846 / double(2 * n + 1); }
+
 /// Kernel-weighted window sums along one streamline of N samples with W values each (row-major
 /// `vals`): `win` (N × W) gets each sample's weighted sum, `norm` (N) its total weight.
 /// Box: samples i−n … i+n, clamped to the line. Exp: Σ_{k=0..n} c^k v_{i+k}, clamped, from the

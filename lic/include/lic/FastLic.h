@@ -31,9 +31,6 @@ namespace lic {
 
 namespace detail {
 
-/// Ripple phase step per sample: one period over the 2n+1 samples of a box window.
-inline double rippleStep(int n) { return 2.0 * 3.14159265358979323846 / double(2 * n + 1); }
-
 /// Fixed-point scale of deposit weights: 2^30. A deposit adds round(w·2^30) to the voxel's
 /// weight and round(value·w·2^30) to its sum; int64 holds ~2^33 full-weight deposits of 1.0.
 constexpr double kWeightScale = 1073741824.0;
@@ -198,8 +195,9 @@ LicResult fastLic(const VelocityField& field, const OutputDomain& domain, const 
                 out[c] = (Wi[c] + g[0] * off[0] + g[1] * off[1] + g[2] * off[2]) * inv;
             }
             if constexpr (Ripple) {
-                // Window sums relative to sample i: rotate Σ_j x_j e^{iθj} by e^{−iθi}.
-                const double cs = std::cos(theta * double(i)), sn = std::sin(theta * double(i));
+                // Window sums relative to sample i: rotate Σ_j x_j e^{iθj} by e^{−iθi} (cos θ_i and
+                // sin θ_i are stored with the sample).
+                const double cs = L.vals[i * W + 3 * P], sn = L.vals[i * W + 3 * P + 1];
                 const double* Rc = Wi + P;
                 const double* Rs = Wi + 2 * P;
                 auto re = [&](int k) { return Rc[k] * cs + Rs[k] * sn; };

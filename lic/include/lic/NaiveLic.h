@@ -25,7 +25,7 @@ LicResult naiveLic(const VelocityField& field, const OutputDomain& domain, const
 {
     constexpr int C = Texture::kChannels;
     constexpr int K = Ripple ? 3 * C + 2 : C; // output channels, as in fastLic()
-    const double theta = 2.0 * 3.14159265358979323846 / double(2 * settings.halfSamples() + 1);
+    const double theta = detail::rippleStep(settings.halfSamples());
     const auto start = std::chrono::steady_clock::now();
     const TraceSettings ts = detail::traceSettings(field, domain, settings);
     LicResult result;
