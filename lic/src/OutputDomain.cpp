@@ -80,7 +80,8 @@ OutputDomain::OutputDomain(const VelocityField& field, int upsample)
 
 template<typename GridT>
 typename GridT::Ptr OutputDomain::makeGrid(const std::vector<typename GridT::ValueType>& slots,
-                                           const std::string& name) const
+                                           const std::string& name,
+                                           const std::vector<std::uint8_t>* keep) const
 {
     using LeafT = typename GridT::TreeType::LeafNodeType;
     using ValueT = typename GridT::ValueType;
@@ -89,15 +90,21 @@ typename GridT::Ptr OutputDomain::makeGrid(const std::vector<typename GridT::Val
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
             auto* leaf = new LeafT(mBlockOrigins[b], openvdb::zeroVal<ValueT>(), false);
             const ValueT* src = slots.data() + b * kBlockVoxels;
+            const std::uint8_t* kept = keep ? keep->data() + b * kBlockVoxels : nullptr;
             for (auto it = mMasks[b]._Find_first(); it < std::size_t(kBlockVoxels);
                  it = mMasks[b]._Find_next(it)) {
-                leaf->setValueOn(openvdb::Index(it), src[it]);
+                if (!kept || kept[it]) leaf->setValueOn(openvdb::Index(it), src[it]);
+            }
+            if (leaf->isEmpty()) {
+                delete leaf;
+                leaf = nullptr;
             }
             leaves[b] = leaf;
         }
     });
     auto grid = GridT::create(openvdb::zeroVal<ValueT>());
-    for (LeafT* leaf : leaves) grid->tree().addLeaf(leaf);
+    for (LeafT* leaf : leaves)
+        if (leaf) grid->tree().addLeaf(leaf);
     grid->setTransform(mTransform->copy());
     grid->setName(name);
     if constexpr (std::is_floating_point_v<ValueT>) {
@@ -108,9 +115,9 @@ typename GridT::Ptr OutputDomain::makeGrid(const std::vector<typename GridT::Val
     return grid;
 }
 
-template openvdb::FloatGrid::Ptr OutputDomain::makeGrid<openvdb::FloatGrid>(const std::vector<float>&,
-                                                                          const std::string&) const;
+template openvdb::FloatGrid::Ptr OutputDomain::makeGrid<openvdb::FloatGrid>(
+    const std::vector<float>&, const std::string&, const std::vector<std::uint8_t>*) const;
 template openvdb::Vec3SGrid::Ptr OutputDomain::makeGrid<openvdb::Vec3SGrid>(
-    const std::vector<openvdb::Vec3s>&, const std::string&) const;
+    const std::vector<openvdb::Vec3s>&, const std::string&, const std::vector<std::uint8_t>*) const;
 
 } // namespace lic

@@ -496,6 +496,58 @@ TEST_F(CliTest, OrientedExpKernel)
     EXPECT_FALSE(fs::exists(work("bad.vdb")));
 }
 
+TEST_F(CliTest, SpotFlagsMapOntoTheRecipeAndWriteHaloAndSeries)
+{
+    const fs::path field = makeField("jet.vdb", "tabbed-jet", "16,16,24");
+    const fs::path out = work("spots.vdb");
+    const RunResult r = bake(field, out,
+                             {"--input", "spots", "--distribution", "jittered", "--jitter", "0.5", "--spacing", "5",
+                              "--radii", "0.75,1.5", "--halo-scale", "2.5", "--width", "speed", "--width-invert",
+                              "--write-series", "--roi", "speed", "--roi-range", "0.1,5", "--roi-mode", "post",
+                              "--quiet"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    const auto grids = readAll(out);
+    for (const char* name : {"density", "halo", "density_w1", "density_w2", "halo_w1", "halo_w2"})
+        EXPECT_TRUE(grids.count(name)) << name;
+    auto density = readFloat(out, "density");
+    ASSERT_TRUE(density);
+    expectUnitRange(*density);
+    EXPECT_EQ(density->metaValue<std::string>("lic_input"), "spots");
+    EXPECT_GT(density->metaValue<openvdb::Int64>("lic_spot_count"), 0);
+    const json recipe = json::parse(density->metaValue<std::string>("licvdb_recipe"));
+    EXPECT_EQ(recipe["input"]["distribution"], "jittered");
+    EXPECT_EQ(recipe["input"]["radii"], json::array({0.75, 1.5}));
+    EXPECT_EQ(recipe["input"]["halo_scale"], 2.5);
+    EXPECT_EQ(recipe["width"]["scalar"], "speed");
+    EXPECT_EQ(recipe["width"]["invert"], true);
+    EXPECT_EQ(recipe["roi"]["mode"], "post");
+    EXPECT_EQ(recipe["roi"]["range"], json::array({0.1, 5.0}));
+    EXPECT_EQ(recipe["output"]["write_series"], true);
+    const json manifest = json::parse(readText(work("spots.json")));
+    EXPECT_EQ(manifest["input"], "spots");
+    EXPECT_EQ(manifest["spots"]["count"].get<openvdb::Int64>(), density->metaValue<openvdb::Int64>("lic_spot_count"));
+
+    // Flags that make no sense alone are refused, naming the flag; nothing is written.
+    const std::vector<std::vector<std::string>> bad{
+        {"--input", "spots", "--roi", "speed"},                  // no range
+        {"--input", "spots", "--radii", "1,x"},                  // not a number
+        {"--input", "spots", "--radii", "2,1"},                  // not increasing
+        {"--input", "spots", "--distribution", "hexagonal"},     // unknown distribution
+        {"--input", "spots", "--width-invert"},                  // no width scalar
+        {"--width", "speed"},                                    // width needs spots
+        {"--input", "spots", "--radii", "1,2"},                  // unused levels
+        {"--input", "spots", "--roi", "nonesuch", "--roi-range", "0,1"}, // unknown scalar
+    };
+    for (const auto& extra : bad) {
+        auto args = extra;
+        args.push_back("--quiet");
+        const RunResult b = bake(field, work("bad.vdb"), args);
+        EXPECT_EQ(b.code, 2) << b.describe();
+        EXPECT_FALSE(b.err.empty());
+        EXPECT_FALSE(fs::exists(work("bad.vdb"))) << b.describe();
+    }
+}
+
 TEST_F(CliTest, CyclicSequence)
 {
     const fs::path field = makeField("abc.vdb");

@@ -533,3 +533,52 @@ TEST(TerminalProgress, CancelIsReported)
     progress.requestCancel();
     EXPECT_TRUE(progress.wasInterrupted());
 }
+
+// ---- field input keys (issue [inputs]) ------------------------------------------------------
+
+TEST(RecipeField, DefaultsResolvedAndRoundTrip)
+{
+    const json j = Recipe{}.toJson()["field"];
+    for (const char* key : {"path", "grid", "format", "voxel_size", "origin", "shape", "dtype", "resample", "crop", "mask",
+                            "nan_policy"})
+        EXPECT_TRUE(j.contains(key)) << key;
+    EXPECT_EQ(j["format"], "auto");
+    EXPECT_TRUE(j["voxel_size"].is_null());
+    EXPECT_TRUE(j["origin"].is_null());
+    EXPECT_TRUE(j["crop"].is_null());
+    EXPECT_EQ(j["dtype"], "float32");
+    EXPECT_EQ(j["mask"], "none");
+    EXPECT_EQ(j["nan_policy"], "refuse");
+
+    const Recipe r = vdbexport::parseRecipe(R"({"field": {"path": "f.raw", "format": "raw", "voxel_size": 0.25,
+        "origin": [1, -2, 3.5], "shape": [4, 5, 6], "dtype": ">f8", "resample": 0.5,
+        "crop": [[0, 0, 0], [1, 2, 3]], "mask": "zero", "nan_policy": "zero"}})");
+    EXPECT_EQ(r.field.format, "raw");
+    ASSERT_TRUE(r.field.voxelSize && r.field.origin && r.field.shape && r.field.resample && r.field.crop);
+    EXPECT_EQ(*r.field.voxelSize, 0.25);
+    EXPECT_EQ((*r.field.origin)[1], -2.0);
+    EXPECT_EQ((*r.field.shape)[2], 6.0);
+    EXPECT_EQ((*r.field.crop)[1][2], 3.0);
+    EXPECT_EQ(r.field.dtype, ">f8");
+    EXPECT_EQ(Recipe::fromJson(r.toJson()), r);
+    EXPECT_EQ(r.toJson()["field"]["crop"], json::parse("[[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]]"));
+}
+
+TEST(RecipeField, ErrorsNameTheKey)
+{
+    EXPECT_NE(parseError(R"({"field": {"voxel_sise": 1}})").find("did you mean \"voxel_size\""), std::string::npos);
+    EXPECT_NE(parseError(R"({"field": {"origin": [1, 2]}})").find("field.origin"), std::string::npos);
+    EXPECT_NE(parseError(R"({"field": {"crop": [1, 2, 3]}})").find("field.crop"), std::string::npos);
+    auto invalid = [](const std::string& patch) {
+        return inputError([&] { vdbexport::parseRecipe(patch); });
+    };
+    EXPECT_NE(invalid(R"({"field": {"voxel_size": 0}})").find("field.voxel_size: must be > 0 (got 0)"), std::string::npos);
+    EXPECT_NE(invalid(R"({"field": {"voxel_size": -2}})").find("field.voxel_size"), std::string::npos);
+    EXPECT_NE(invalid(R"({"field": {"resample": 0}})").find("field.resample"), std::string::npos);
+    EXPECT_NE(invalid(R"({"field": {"shape": [4, 0, 4]}})").find("field.shape[1]"), std::string::npos);
+    EXPECT_NE(invalid(R"({"field": {"shape": [4, 2.5, 4]}})").find("field.shape[1]"), std::string::npos);
+    EXPECT_NE(invalid(R"({"field": {"crop": [[0, 0, 5], [1, 1, 1]]}})").find("on axis z"), std::string::npos);
+    EXPECT_NE(invalid(R"({"field": {"nan_policy": "zeros"}})").find("did you mean \"zero\""), std::string::npos);
+    EXPECT_NE(invalid(R"({"field": {"format": "vtu"}})").find("field.format"), std::string::npos);
+    EXPECT_NE(invalid(R"({"field": {"dtype": "float16"}})").find("field.dtype"), std::string::npos);
+}

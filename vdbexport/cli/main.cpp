@@ -7,6 +7,7 @@
 #include "vdbexport/Bake.h"
 #include "vdbexport/Info.h"
 #include "vdbexport/Recipe.h"
+#include "vdbexport/Render.h"
 #include "vdbexport/TerminalProgress.h"
 #include "vdbexport/VdbIO.h"
 
@@ -16,6 +17,7 @@
 #include <CLI/CLI.hpp>
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
 #include <iostream>
@@ -35,10 +37,20 @@ struct Common
     bool quiet = false;
     bool json = false;
     int threads = 0;
+    std::string progress = "bar";
+
+    vdbexport::TerminalProgress::Style progressStyle() const
+    {
+        return progress == "lines" ? vdbexport::TerminalProgress::Style::Lines : vdbexport::TerminalProgress::Style::Bar;
+    }
 };
 
 void addCommon(CLI::App* cmd, Common& c)
 {
+    cmd->add_option("--progress", c.progress,
+                    "bar: a progress bar when stderr is a terminal; lines: one `progress FRACTION STAGE` "
+                    "line per update on stderr, for programs [bar]")
+        ->check(CLI::IsMember({"bar", "lines"}));
     cmd->add_flag("-q,--quiet", c.quiet, "No progress or messages on stderr");
     cmd->add_flag("--json", c.json, "Print a machine-readable JSON summary on stdout");
     cmd->add_option("--threads", c.threads, "Worker threads (0 = all cores)")->check(CLI::Range(0, 1024));
@@ -61,6 +73,26 @@ openvdb::Coord parseRes(const std::string& s)
     if (v.size() == 1) return openvdb::Coord(v[0]);
     if (v.size() != 3) throw lic::InputError("--res \"" + s + "\" needs 1 or 3 numbers (X,Y,Z)");
     return openvdb::Coord(v[0], v[1], v[2]);
+}
+
+/// "1,2,3" → exactly `n` numbers, for --origin, --shape and --crop.
+std::vector<double> parseNumbers(const std::string& flag, const std::string& s, std::size_t n, const char* expected)
+{
+    std::vector<double> v;
+    std::stringstream in(s);
+    std::string part;
+    while (std::getline(in, part, ',')) {
+        try {
+            std::size_t used = 0;
+            v.push_back(std::stod(part, &used));
+            if (used != part.size()) throw std::invalid_argument(part);
+        } catch (const std::exception&) {
+            throw lic::InputError(flag + " \"" + s + "\": \"" + part + "\" is not a number; expected " + expected);
+        }
+    }
+    if (v.size() != n)
+        throw lic::InputError(flag + " \"" + s + "\" has " + std::to_string(v.size()) + " numbers; expected " + expected);
+    return v;
 }
 
 std::string presetList()
@@ -103,7 +135,7 @@ int main(int argc, char** argv)
     bake->add_option("--grid", cli.field.grid, "Vector grid name (default: velocity, vel, v, the only Vec3 grid)");
     bake->add_option("-o,--out", cli.output.path, "Output .vdb (a sidecar OUT.json manifest is written too)");
     bake->add_option("-r,--recipe", recipePath, "JSON recipe; flags override its values");
-    auto* oInput = bake->add_option("--input", cli.input.type, "Input texture: noise (spots: later)");
+    auto* oInput = bake->add_option("--input", cli.input.type, "Input texture: noise|spots [noise]");
     auto* oFilter = bake->add_option("--noise-filter", cli.input.noiseFilter, "Noise reconstruction: binomial|none [binomial]");
     auto* oEngine = bake->add_option("--engine", cli.lic.engine, "naive|fast [fast]");
     auto* oKernel = bake->add_option("--kernel", cli.lic.kernel, "box|exp (oriented streamlets, bright head downstream) [box]");
@@ -121,10 +153,39 @@ int main(int argc, char** argv)
                      "Colour by a scalar: speed, vorticity, streamwise-vorticity, helicity, q-criterion, lambda2, or a float grid of the field file");
     auto* oColormap = bake->add_option("--colormap", colormap,
                                        "heated-object|red-yellow|grey-purple|viridis|magma|inferno|cividis|coolwarm or a value,r,g,b .csv [viridis]");
+    std::string fieldOrigin, fieldShape, fieldCrop;
+    double fieldVoxelSize = 0, fieldResample = 0;
+    auto* oFormat = bake->add_option("--format", cli.field.format, "Field format: auto|vdb|npy|vti|vtk|raw [auto: by extension]");
+    auto* oVoxelSize = bake->add_option("--voxel-size", fieldVoxelSize, "Dense inputs (npy, raw, vti, vtk): world units per voxel [file's, else 1]");
+    bake->add_option("--origin", fieldOrigin, "Dense inputs: world position X,Y,Z of voxel (0,0,0)'s centre [file's, else 0]");
+    bake->add_option("--shape", fieldShape, "Raw input: X,Y,Z voxels (data is X,Y,Z,3 in C order)");
+    auto* oDtype = bake->add_option("--dtype", cli.field.dtype, "Raw input: float32|float64|<f4|>f4|<f8|>f8 [float32]");
+    auto* oResample = bake->add_option("--resample", fieldResample, "Resample the field to this voxel size, world units");
+    bake->add_option("--crop", fieldCrop, "Crop the field to world box X0,Y0,Z0,X1,Y1,Z1");
+    auto* oMask = bake->add_option("--mask", cli.field.mask, "none|zero: zero deactivates zero-velocity voxels [none]");
+    auto* oNanPolicy = bake->add_option("--nan-policy", cli.field.nanPolicy, "refuse|zero: NaN/Inf in the field is an error, or set to 0 [refuse]");
     auto* oFrames = bake->add_option("--frames", cli.animation.frames, "Frames of a cyclic animation [1]");
     bool writeInput = false, writeTangent = false;
     auto* oWriteInput = bake->add_flag("--write-input", writeInput, "Also write the input texture as grid `input`");
     auto* oWriteTangent = bake->add_flag("--write-tangent", writeTangent, "Also write the unit flow direction as vec3s grid `tangent`");
+    // Spots, halos, width, region and surface of interest.
+    std::string spotRadii, roiScalar, roiRange, roiMode, widthScalar, widthRange, surfaceScalar;
+    double surfaceThreshold = 0.0;
+    bool writeSeries = false, widthInvert = false;
+    auto* oDistribution = bake->add_option("--distribution", cli.input.distribution, "Spots: regular|random|jittered|poisson [poisson]");
+    auto* oSpacing = bake->add_option("--spacing", cli.input.spacing, "Spots: spacing d between spot centres, output voxels [6]");
+    auto* oJitter = bake->add_option("--jitter", cli.input.jitter, "Jittered spots: offset up to ±jitter·d/2 per axis, [0,1] [0.25]");
+    bake->add_option("--radii", spotRadii, "Spots: line radii R1,R2,... increasing, output voxels (one per width level, at most 4) [1]");
+    auto* oHaloScale = bake->add_option("--halo-scale", cli.input.haloScale, "Spots: halo radius / line radius, >= 1 [2]");
+    bake->add_option("--surface", surfaceScalar, "Spots on the ridge surface of a scalar (e.g. speed-gradient = |grad speed|)");
+    auto* oSurfaceThreshold = bake->add_option("--surface-threshold", surfaceThreshold, "--surface: ridge points need scalar > this [0]");
+    bake->add_option("--roi", roiScalar, "Region of interest by a scalar (speed, vorticity, a float grid, NAME-gradient)");
+    bake->add_option("--roi-range", roiRange, "--roi: kept range LO,HI in the scalar's units");
+    auto* oRoiMode = bake->add_option("--roi-mode", roiMode, "--roi: pre (mask the input; lines leave along the flow) | post (mask the output) [pre]");
+    bake->add_option("--width", widthScalar, "Spots: pick the width level per voxel by a scalar (needs 2+ radii)");
+    bake->add_option("--width-range", widthRange, "--width: scalar range LO,HI mapped onto narrowest..widest [auto: 1st-99th percentile]");
+    bake->add_flag("--width-invert", widthInvert, "--width: high scalar = thin lines (the seed shows slow flow wide)");
+    bake->add_flag("--write-series", writeSeries, "Spots: also write density_w<k> and halo_w<k> for every width level");
     addCommon(bake, bakeCommon);
     bake->footer(
         "Lengths are in output voxels (field voxel size / upsample).\n\n"
@@ -133,7 +194,11 @@ int main(int argc, char** argv)
         "  licvdb bake --field jet.vdb --out jet_lic.vdb\n"
         "  licvdb bake --field abc.vdb --out abc_lic.vdb --length 40 --step 0.5 --json\n"
         "  licvdb bake --recipe examples/recipes/tabbed-jet.json --threads 2\n"
-        "  licvdb bake --field jet.vdb --out jet_vort.vdb --color vorticity --colormap heated-object\n");
+        "  licvdb bake --field jet.vdb --out jet_vort.vdb --color vorticity --colormap heated-object\n"
+        "  licvdb bake --field cache_data/fluid_data_0010.vdb --out smoke_lic.vdb   # Blender smoke cache\n"
+        "  licvdb bake --field flow.npy --voxel-size 0.1 --origin -1,-1,0 --out flow_lic.vdb\n"
+        "  licvdb bake --field flow.raw --shape 64,64,32 --dtype float64 --out flow_lic.vdb\n"
+        "Field formats and preparation: see docs/inputs.md.\n");
 
     // info -------------------------------------------------------------------------------------
     Common infoCommon;
@@ -143,10 +208,54 @@ int main(int argc, char** argv)
     addCommon(info, infoCommon);
     info->footer("Examples:\n  licvdb info jet_lic.vdb\n  licvdb info jet_lic.vdb --json | python3 -m json.tool\n");
 
+    // render -----------------------------------------------------------------------------------
+    Common renderCommon;
+    vdbexport::RenderJob rjob;
+    vdbexport::RenderFlagStrings rflags;
+    double rAzimuth = 0, rElevation = 0, rDistance = 0, rEyeSep = 0;
+    CLI::App* render = app.add_subcommand("render", "Raycast a baked .vdb to an image (reference halo renderer)");
+    render->add_option("input", rjob.input, "Baked .vdb (a `density` grid), first frame OUT_0001.vdb, or a bake's OUT.json")->required();
+    render->add_option("-o,--out", rjob.output, "Image: .png/.jpg/.tif (display, via OCIO), .exr (scene-linear), .gif")->required();
+    render->add_option("--size", rflags.size, "Image size W,H in pixels [1024,1024]");
+    render->add_option("--view", rflags.view, "front|back|left|right|top|bottom (Blender's, Z up) [front]");
+    render->add_flag("--ortho", rjob.camera.orthographic, "Orthographic camera (default perspective)");
+    auto* oAz = render->add_option("--azimuth", rAzimuth, "Degrees about +Z from the front view (90 = right view); overrides --view's");
+    auto* oEl = render->add_option("--elevation", rElevation, "Degrees above the horizon (90 = top view); overrides --view's");
+    auto* oDist = render->add_option("--distance", rDistance, "Camera distance from the bbox centre, world units [fit]");
+    render->add_option("--fov", rjob.camera.fovY, "Vertical field of view, degrees [30]");
+    render->add_option("--halos", rflags.halos, "on|off: halo compositing when the file has a `halo` grid [on]");
+    render->add_option("--halo-strength", rjob.settings.haloStrength, "Opacity added at a halo exit per unit of its max halo [1]");
+    render->add_option("--halo-threshold", rjob.settings.haloThreshold, "A ray is inside a halo where halo > this [0.05]");
+    render->add_option("--density-scale", rjob.settings.densityScale, "Extinction per unit density per voxel length [1]");
+    render->add_option("--density-range", rflags.densityRange, "LO,HI transfer window on density [0,1]");
+    render->add_option("--brightness", rjob.settings.brightness, "Emission multiplier [1]");
+    render->add_option("--step", rjob.settings.step, "Ray step, voxels [0.5]");
+    bool rNoSkip = false;
+    render->add_flag("--no-skipping", rNoSkip, "Diagnostic: march empty 8^3 bricks too (same image, slower)");
+    render->add_option("--colormap", rjob.colormap, "Colour by the `scalar` grid: a colormap name or value,r,g,b .csv");
+    render->add_option("--field", rjob.field, "Velocity .vdb: line tangents for lighting when there is no `tangent` grid");
+    render->add_option("--light", rflags.light, "headlight | X,Y,Z (direction towards the light) | off [headlight]");
+    render->add_option("--stereo", rflags.stereo, "sbs (side by side, 2W wide) | anaglyph (red-cyan)");
+    auto* oEye = render->add_option("--eye-separation", rEyeSep, "Stereo eye distance, world units [distance/30]");
+    render->add_option("--frames", rjob.frames, "Render the sequence IN_0001.vdb … IN_000N.vdb to IMAGE_0001 …");
+    render->add_flag("--gif", rjob.gif, "With a sequence, also write an animated IMAGE.gif");
+    render->add_option("--fps", rjob.fps, "GIF frame rate [12]");
+    render->add_option("--view-transform", rjob.viewTransform, "standard|filmic (OCIO view for .png/.jpg/.gif) [standard]");
+    render->add_option("--ocio-config", rjob.ocioConfig, "OCIO config [$LICVDB_OCIO_CONFIG, else the shipped one]");
+    addCommon(render, renderCommon);
+    render->footer(
+        "Examples:\n"
+        "  licvdb render jet_lic.vdb --out jet.png\n"
+        "  licvdb render jet_lic.vdb --out jet.exr --view right --elevation 20 --size 1920,1080\n"
+        "  licvdb render jet_lic.vdb --out jet.png --halos off --density-scale 0.3 --view-transform filmic\n"
+        "  licvdb render jet_lic.vdb --out jet_sbs.png --stereo sbs\n"
+        "  licvdb render loop_0001.vdb --frames 24 --out loop.png --gif     # loop_0001.png … + loop.gif\n"
+        "See docs/render.md for the algorithm, the transfer function and the --json camera.\n");
+
     // help / version ---------------------------------------------------------------------------
     std::string helpTopic;
     CLI::App* help = app.add_subcommand("help", "Show help for a command");
-    help->add_option("command", helpTopic, "field, bake, info");
+    help->add_option("command", helpTopic, "field, bake, render, info");
     app.add_subcommand("version", "Print the version");
 
     try {
@@ -168,7 +277,7 @@ int main(int argc, char** argv)
                 sub = app.get_subcommand(helpTopic);
             } catch (const CLI::OptionNotFound&) {
             }
-            if (!sub) throw lic::InputError("no command \"" + helpTopic + "\"; expected field, bake or info");
+            if (!sub) throw lic::InputError("no command \"" + helpTopic + "\"; expected field, bake, render or info");
             std::cout << sub->help();
             return 0;
         }
@@ -196,6 +305,31 @@ int main(int argc, char** argv)
             return 0;
         }
 
+        if (render->parsed()) {
+            currentCommand = "licvdb render";
+            vdbexport::applyRenderFlags(rjob, rflags);
+            if (oAz->count()) rjob.azimuth = rAzimuth;
+            if (oEl->count()) rjob.elevation = rElevation;
+            if (oDist->count()) rjob.camera.distance = rDistance;
+            if (oEye->count()) rjob.eyeSeparation = rEyeSep;
+            rjob.settings.threads = renderCommon.threads;
+            rjob.settings.emptySpaceSkipping = !rNoSkip;
+            vdbexport::TerminalProgress progress(renderCommon.quiet, stderr, false, renderCommon.progressStyle());
+            gProgress = &progress;
+            std::signal(SIGINT, onInterrupt);
+            const nlohmann::json summary = vdbexport::render(rjob, progress);
+            progress.finishLine();
+            gProgress = nullptr;
+            if (renderCommon.json) {
+                std::cout << summary.dump(2) << "\n";
+            } else if (!renderCommon.quiet) {
+                for (const auto& f : summary["files"]) std::fprintf(stderr, "wrote %s\n", f.get<std::string>().c_str());
+                std::fprintf(stderr, "rendered %d frame(s) in %.2f s\n", summary["frames"].get<int>(),
+                             summary["seconds"]["render"].get<double>());
+            }
+            return 0;
+        }
+
         if (info->parsed()) {
             currentCommand = "licvdb info";
             const nlohmann::json d = vdbexport::describeVdb(infoPath);
@@ -210,6 +344,24 @@ int main(int argc, char** argv)
             if (!cli.field.path.empty()) r.field.path = cli.field.path;
             if (!cli.field.grid.empty()) r.field.grid = cli.field.grid;
             if (!cli.output.path.empty()) r.output.path = cli.output.path;
+            if (oFormat->count()) r.field.format = cli.field.format;
+            if (oVoxelSize->count()) r.field.voxelSize = fieldVoxelSize;
+            if (oDtype->count()) r.field.dtype = cli.field.dtype;
+            if (oResample->count()) r.field.resample = fieldResample;
+            if (oMask->count()) r.field.mask = cli.field.mask;
+            if (oNanPolicy->count()) r.field.nanPolicy = cli.field.nanPolicy;
+            if (!fieldOrigin.empty()) {
+                const auto v = parseNumbers("--origin", fieldOrigin, 3, "X,Y,Z");
+                r.field.origin = std::array<double, 3>{v[0], v[1], v[2]};
+            }
+            if (!fieldShape.empty()) {
+                const auto v = parseNumbers("--shape", fieldShape, 3, "X,Y,Z (voxels)");
+                r.field.shape = std::array<double, 3>{v[0], v[1], v[2]};
+            }
+            if (!fieldCrop.empty()) {
+                const auto v = parseNumbers("--crop", fieldCrop, 6, "X0,Y0,Z0,X1,Y1,Z1 (world units)");
+                r.field.crop = std::array<std::array<double, 3>, 2>{{{v[0], v[1], v[2]}, {v[3], v[4], v[5]}}};
+            }
             if (oInput->count()) r.input.type = cli.input.type;
             if (oFilter->count()) r.input.noiseFilter = cli.input.noiseFilter;
             if (oEngine->count()) r.lic.engine = cli.lic.engine;
@@ -234,14 +386,61 @@ int main(int argc, char** argv)
             }
             if (oWriteInput->count()) r.output.writeInput = true;
             if (oWriteTangent->count()) r.output.writeTangent = true;
+            if (oDistribution->count()) r.input.distribution = cli.input.distribution;
+            if (oSpacing->count()) r.input.spacing = cli.input.spacing;
+            if (oJitter->count()) r.input.jitter = cli.input.jitter;
+            if (!spotRadii.empty()) {
+                const auto n = std::size_t(std::count(spotRadii.begin(), spotRadii.end(), ',')) + 1;
+                r.input.radii = parseNumbers("--radii", spotRadii, n, "R1,R2,... (output voxels)");
+            }
+            if (oHaloScale->count()) r.input.haloScale = cli.input.haloScale;
+            if (!surfaceScalar.empty()) {
+                if (!r.input.surface) r.input.surface = vdbexport::SurfaceSpec{};
+                r.input.surface->scalar = surfaceScalar;
+            }
+            if (oSurfaceThreshold->count()) {
+                if (!r.input.surface) throw lic::InputError("--surface-threshold needs --surface SCALAR");
+                r.input.surface->threshold = surfaceThreshold;
+            }
+            if (!roiScalar.empty()) {
+                if (!r.roi && roiRange.empty())
+                    throw lic::InputError("--roi " + roiScalar + " needs --roi-range LO,HI (the kept range in the scalar's units)");
+                if (!r.roi) r.roi = vdbexport::RoiSpec{};
+                r.roi->scalar = roiScalar;
+            }
+            if (!roiRange.empty()) {
+                if (!r.roi) throw lic::InputError("--roi-range needs --roi SCALAR");
+                const auto v = parseNumbers("--roi-range", roiRange, 2, "LO,HI");
+                r.roi->range = {v[0], v[1]};
+            }
+            if (oRoiMode->count()) {
+                if (!r.roi) throw lic::InputError("--roi-mode needs --roi SCALAR");
+                r.roi->mode = roiMode;
+            }
+            if (!widthScalar.empty()) {
+                if (!r.width) r.width = vdbexport::WidthSpec{};
+                r.width->scalar = widthScalar;
+            }
+            if (!widthRange.empty()) {
+                if (!r.width) throw lic::InputError("--width-range needs --width SCALAR");
+                const auto v = parseNumbers("--width-range", widthRange, 2, "LO,HI");
+                r.width->range = std::array<double, 2>{v[0], v[1]};
+            }
+            if (widthInvert) {
+                if (!r.width) throw lic::InputError("--width-invert needs --width SCALAR");
+                r.width->invert = true;
+            }
+            if (writeSeries) r.output.writeSeries = true;
             if (bake->get_option("--threads")->count()) r.threads = bakeCommon.threads;
 
-            vdbexport::TerminalProgress progress(bakeCommon.quiet);
+            vdbexport::TerminalProgress progress(bakeCommon.quiet, stderr, false, bakeCommon.progressStyle());
             gProgress = &progress;
             std::signal(SIGINT, onInterrupt);
             const nlohmann::json summary = vdbexport::bake(r, progress);
             progress.finishLine();
             gProgress = nullptr;
+            if (!bakeCommon.quiet && summary.contains("field") && summary["field"].contains("notes"))
+                for (const auto& note : summary["field"]["notes"]) std::cerr << "licvdb bake: " << note.get<std::string>() << "\n";
             if (bakeCommon.json) {
                 std::cout << summary.dump(2) << "\n";
             } else if (!bakeCommon.quiet) {

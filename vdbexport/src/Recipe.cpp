@@ -94,7 +94,15 @@ template <class T> struct Schema;
 
 template <> struct Schema<FieldSpec>
 {
-    static auto fields() { return std::make_tuple(field("path", &FieldSpec::path), field("grid", &FieldSpec::grid)); }
+    static auto fields()
+    {
+        return std::make_tuple(field("path", &FieldSpec::path), field("grid", &FieldSpec::grid),
+            field("format", &FieldSpec::format), field("voxel_size", &FieldSpec::voxelSize),
+            field("origin", &FieldSpec::origin), field("shape", &FieldSpec::shape),
+            field("dtype", &FieldSpec::dtype), field("resample", &FieldSpec::resample),
+            field("crop", &FieldSpec::crop), field("mask", &FieldSpec::mask),
+            field("nan_policy", &FieldSpec::nanPolicy));
+    }
 };
 template <> struct Schema<OutputSpec>
 {
@@ -265,6 +273,48 @@ void read(const json& j, const Where& w, std::optional<std::array<double, 2>>& o
     out = range;
 }
 
+/// null = absent, else a number.
+void read(const json& j, const Where& w, std::optional<double>& out)
+{
+    if (j.is_null()) {
+        out.reset();
+        return;
+    }
+    if (!j.is_number()) w.expected("a number or null", j);
+    out = j.get<double>();
+}
+
+void read(const json& j, const Where& w, std::array<double, 3>& out)
+{
+    if (!j.is_array() || j.size() != 3) w.expected("[x, y, z] (an array of three numbers)", j);
+    for (std::size_t i = 0; i < 3; ++i) read(j[i], w.at(i), out[i]);
+}
+
+/// null = absent, else [x, y, z].
+void read(const json& j, const Where& w, std::optional<std::array<double, 3>>& out)
+{
+    if (j.is_null()) {
+        out.reset();
+        return;
+    }
+    std::array<double, 3> v{};
+    read(j, w, v);
+    out = v;
+}
+
+/// null = absent, else [[x0, y0, z0], [x1, y1, z1]].
+void read(const json& j, const Where& w, std::optional<std::array<std::array<double, 3>, 2>>& out)
+{
+    if (j.is_null()) {
+        out.reset();
+        return;
+    }
+    if (!j.is_array() || j.size() != 2) w.expected("[[x0, y0, z0], [x1, y1, z1]] or null", j);
+    std::array<std::array<double, 3>, 2> v{};
+    for (std::size_t i = 0; i < 2; ++i) read(j[i], w.at(i), v[i]);
+    out = v;
+}
+
 /// Every key of object `j` must be one of `valid`.
 void checkKeys(const json& j, const Where& w, const std::vector<std::string>& valid)
 {
@@ -323,6 +373,21 @@ json write(const std::vector<double>& v)
 json write(const std::array<double, 2>& v) { return write(std::vector<double>(v.begin(), v.end())); }
 
 json write(const std::optional<std::array<double, 2>>& v) { return v ? write(*v) : json("auto"); }
+
+json write(const std::optional<double>& v) { return v ? json(*v) : json(nullptr); }
+
+json write(const std::array<double, 3>& v) { return write(std::vector<double>(v.begin(), v.end())); }
+
+json write(const std::optional<std::array<double, 3>>& v) { return v ? write(*v) : json(nullptr); }
+
+json write(const std::optional<std::array<std::array<double, 3>, 2>>& v)
+{
+    if (!v) return json(nullptr);
+    json j = json::array();
+    j.push_back(write((*v)[0]));
+    j.push_back(write((*v)[1]));
+    return j;
+}
 
 template <Described T>
 json write(const T& v)
@@ -404,6 +469,35 @@ Recipe Recipe::fromJson(const nlohmann::json& j, const std::string& source)
 
 void Recipe::validate() const
 {
+    checkChoice("field.format", field.format);
+    checkChoice("field.dtype", field.dtype);
+    checkChoice("field.mask", field.mask);
+    checkChoice("field.nan_policy", field.nanPolicy);
+    if (field.voxelSize) checkPositive("field.voxel_size", *field.voxelSize);
+    if (field.resample) checkPositive("field.resample", *field.resample);
+    if (field.origin) {
+        for (std::size_t a = 0; a < 3; ++a) {
+            const double v = (*field.origin)[a];
+            if (!std::isfinite(v)) violation("field.origin[" + std::to_string(a) + "]", "finite", fmt(v));
+        }
+    }
+    if (field.shape) {
+        for (std::size_t a = 0; a < 3; ++a) {
+            const double v = (*field.shape)[a];
+            if (!(v >= 1) || v != std::floor(v) || v > 1e9)
+                violation("field.shape[" + std::to_string(a) + "]", "an integer in [1, 1e9]", fmt(v));
+        }
+    }
+    if (field.crop) {
+        const auto& c = *field.crop;
+        for (std::size_t a = 0; a < 3; ++a) {
+            if (!std::isfinite(c[0][a]) || !std::isfinite(c[1][a]) || !(c[0][a] < c[1][a])) {
+                violation("field.crop", "[[x0, y0, z0], [x1, y1, z1]] with finite x0 < x1, y0 < y1, z0 < z1",
+                          "[" + fmt(c[0][a]) + ", " + fmt(c[1][a]) + "] on axis " + "xyz"[a]);
+            }
+        }
+    }
+
     checkInt("output.upsample", output.upsample, 1, 16);
     checkChoice("output.contrast", output.contrast);
 
@@ -525,6 +619,10 @@ const std::vector<std::string>& allowedValues(const std::string& keyPath)
         {"input.noise_filter", {"binomial", "none"}},
         {"roi.mode", {"pre", "post"}},
         {"output.contrast", {"stretch", "none"}},
+        {"field.format", {"auto", "vdb", "npy", "vti", "vtk", "raw"}},
+        {"field.dtype", {"float32", "float64", "f4", "f8", "<f4", "<f8", ">f4", ">f8"}},
+        {"field.mask", {"none", "zero"}},
+        {"field.nan_policy", {"refuse", "zero"}},
     };
     static const std::vector<std::string> none;
     const auto it = table.find(keyPath);

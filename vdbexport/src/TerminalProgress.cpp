@@ -47,9 +47,10 @@ std::string duration(double seconds)
 
 } // namespace
 
-TerminalProgress::TerminalProgress(bool quiet, FILE* out, bool forceEnabled)
+TerminalProgress::TerminalProgress(bool quiet, FILE* out, bool forceEnabled, Style style)
     : mOut(out)
-    , mEnabled(!quiet && out != nullptr && (forceEnabled || ::isatty(::fileno(out)) == 1))
+    , mStyle(style)
+    , mEnabled(!quiet && out != nullptr && (forceEnabled || style == Style::Lines || ::isatty(::fileno(out)) == 1))
 {
 }
 
@@ -108,6 +109,13 @@ void TerminalProgress::draw(bool final)
     std::uint64_t done = mDone.load(std::memory_order_relaxed);
     if (final && mTotal > 0) done = std::max(done, mTotal);
     const double rate = elapsed > 0 ? double(done) / elapsed : 0.0;
+
+    if (mStyle == Style::Lines) {
+        const double fraction = mTotal > 0 ? std::min(1.0, double(done) / double(mTotal)) : -1.0;
+        std::fprintf(mOut, "progress %.4f %s\n", fraction, mStage.c_str());
+        std::fflush(mOut);
+        return;
+    }
 
     std::string line = mStage;
     if (mTotal > 0) {

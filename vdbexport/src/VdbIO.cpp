@@ -4,6 +4,7 @@
 
 #include <openvdb/Exceptions.h>
 #include <openvdb/io/GridDescriptor.h>
+#include <openvdb/tools/Interpolation.h>
 #include <openvdb/tree/LeafManager.h>
 
 #include <algorithm>
@@ -392,6 +393,85 @@ bool isVec3Type(const std::string& valueType)
 // ------------------------------------------------------------------------------------------
 // reading
 
+namespace {
+
+bool isScalarType(const std::string& t)
+{
+    return t == openvdb::typeNameAsString<float>() || t == openvdb::typeNameAsString<double>();
+}
+
+/// The base name `b` for which `b.x`, `b.y`, `b.z` (or `b_x`…) are all scalar grids of the file,
+/// preferring `velocity`, `vel`, `v`; "" if there is none. `sep` receives the separator.
+std::string findSplitBase(const std::vector<std::pair<std::string, std::string>>& grids, const std::string& only,
+                          std::string& sep)
+{
+    const auto has = [&](const std::string& n) {
+        return std::any_of(grids.begin(), grids.end(), [&](const auto& g) { return g.first == n && isScalarType(g.second); });
+    };
+    std::vector<std::string> candidates;
+    if (!only.empty()) candidates.push_back(only);
+    else {
+        for (const char* n : kDefaultVelocityNames) candidates.emplace_back(n);
+        for (const auto& g : grids)
+            if (g.first.size() > 2 && (g.first.compare(g.first.size() - 2, 2, ".x") == 0 || g.first.compare(g.first.size() - 2, 2, "_x") == 0))
+                candidates.push_back(g.first.substr(0, g.first.size() - 2));
+    }
+    for (const auto& b : candidates)
+        for (const char* sp : {".", "_"})
+            if (has(b + sp + "x") && has(b + sp + "y") && has(b + sp + "z")) {
+                sep = sp;
+                return b;
+            }
+    return "";
+}
+
+/// One Vec3 grid from three scalar component grids (Houdini's split `vel.x`, `vel.y`, `vel.z`).
+/// The result has the x grid's transform and the union of the three active regions; each
+/// component is sampled trilinearly at the result's voxel centres in world space, so component
+/// grids offset by half a voxel (face-centred, MAC style) are handled too.
+openvdb::Vec3SGrid::Ptr combineSplit(detail::VdbReader& reader, const std::string& base, const std::string& sep)
+{
+    openvdb::FloatGrid::Ptr comp[3];
+    for (int a = 0; a < 3; ++a) {
+        comp[a] = toFloat(reader.readGrid(base + sep + "xyz"[a]));
+        if (!comp[a]) throw lic::InputError("grid " + quote(base + sep + "xyz"[a]) + " in " + quote(reader.path()) + " is not a scalar grid");
+        if (!comp[a]->transform().isLinear())
+            throw lic::InputError("grid " + quote(base + sep + "xyz"[a]) + " in " + quote(reader.path()) + " has a non-linear transform");
+    }
+    auto out = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+    out->setTransform(comp[0]->transform().copy());
+    out->setName(base);
+    out->setVectorType(openvdb::VEC_CONTRAVARIANT_RELATIVE);
+    const bool sameXform = comp[1]->transform() == comp[0]->transform() && comp[2]->transform() == comp[0]->transform();
+    for (int a = 0; a < 3; ++a) {
+        if (sameXform) {
+            out->tree().topologyUnion(comp[a]->tree());
+        } else {
+            const openvdb::CoordBBox bb = comp[a]->evalActiveVoxelBoundingBox();
+            if (bb.empty()) continue;
+            const openvdb::BBoxd w = comp[a]->transform().indexToWorld(bb);
+            const openvdb::Vec3d lo = out->worldToIndex(w.min()), hi = out->worldToIndex(w.max());
+            out->tree().sparseFill(openvdb::CoordBBox(openvdb::Coord::round(openvdb::math::minComponent(lo, hi)),
+                                                      openvdb::Coord::round(openvdb::math::maxComponent(lo, hi))),
+                                   openvdb::Vec3s(0.0f), true);
+        }
+    }
+    out->tree().voxelizeActiveTiles();
+    using Sampler = openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler>;
+    openvdb::FloatGrid::ConstAccessor acc[3] = {comp[0]->getConstAccessor(), comp[1]->getConstAccessor(), comp[2]->getConstAccessor()};
+    for (auto it = out->tree().beginValueOn(); it; ++it) {
+        openvdb::Vec3s v;
+        for (int a = 0; a < 3; ++a) {
+            if (sameXform) v[a] = acc[a].getValue(it.getCoord());
+            else v[a] = Sampler(acc[a], comp[a]->transform()).wsSample(out->indexToWorld(it.getCoord()));
+        }
+        it.setValue(v);
+    }
+    return out;
+}
+
+} // namespace
+
 openvdb::Vec3SGrid::Ptr readVelocityGrid(const std::string& path, const std::string& name,
                                          std::string* chosenName)
 {
@@ -404,9 +484,15 @@ openvdb::Vec3SGrid::Ptr readVelocityGrid(const std::string& path, const std::str
     std::string chosen;
     if (!name.empty()) {
         const auto it = find(name);
-        if (it == grids.end())
+        if (it == grids.end()) {
+            std::string sep;
+            if (!findSplitBase(grids, name, sep).empty()) {
+                if (chosenName) *chosenName = name;
+                return combineSplit(reader, name, sep);
+            }
             throw lic::InputError("grid " + quote(name) + " not found in " + quote(path)
                                   + "; the file has: " + detail::listGrids(grids));
+        }
         if (!detail::isVec3Type(it->second))
             throw lic::InputError("grid " + quote(name) + " in " + quote(path) + " is a " + it->second
                                   + " grid; a " + it->second + " grid cannot be a velocity field "
@@ -424,6 +510,12 @@ openvdb::Vec3SGrid::Ptr readVelocityGrid(const std::string& path, const std::str
             std::vector<std::pair<std::string, std::string>> vec3;
             for (const auto& g : grids)
                 if (detail::isVec3Type(g.second)) vec3.push_back(g);
+            std::string sep;
+            const std::string split = vec3.empty() ? findSplitBase(grids, "", sep) : "";
+            if (!split.empty()) {
+                if (chosenName) *chosenName = split;
+                return combineSplit(reader, split, sep);
+            }
             if (vec3.empty())
                 throw lic::InputError(quote(path) + " has no Vec3 grid to use as a velocity field; "
                                       "the file has: " + detail::listGrids(grids)

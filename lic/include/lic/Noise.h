@@ -3,6 +3,7 @@
 #pragma once
 
 #include <openvdb/openvdb.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
@@ -62,6 +63,18 @@ public:
 
     /// Texture value at voxel (i, j, k): what `--write-input` writes.
     float voxel(const openvdb::Coord& ijk) const { return at(ijk[0], ijk[1], ijk[2]); }
+
+    /// Multiply every stored voxel value by weight(voxel) (a region-of-interest pre-mask), in
+    /// parallel; `weight` must be thread-safe and deterministic.
+    template<typename F>
+    void multiply(const F& weight)
+    {
+        tbb::parallel_for(0, mDim[0], [&](int i) {
+            for (int j = 0; j < mDim[1]; ++j)
+                for (int k = 0; k < mDim[2]; ++k)
+                    mData[offset(i, j, k)] *= float(weight(mLo + openvdb::Coord(i, j, k)));
+        });
+    }
 
     /// Trilinear value at a continuous output-index position.
     void sample(const openvdb::Vec3d& p, float* out) const { sampleGradient(p, out, nullptr); }

@@ -93,12 +93,16 @@ public:
 
     /// Build a grid from a per-slot array (active voxels only; leaf voxels, no tiles), with the
     /// output transform. GridT is openvdb::FloatGrid (class fog volume) or openvdb::Vec3SGrid.
+    /// With `keep`, only slots with keep[s] != 0 become active (a sparse bake), and blocks with no
+    /// kept voxel get no leaf.
     template<typename GridT>
     typename GridT::Ptr makeGrid(const std::vector<typename GridT::ValueType>& slots,
-                                 const std::string& name) const;
-    openvdb::FloatGrid::Ptr makeGrid(const std::vector<float>& slots, const std::string& name) const
+                                 const std::string& name,
+                                 const std::vector<std::uint8_t>* keep = nullptr) const;
+    openvdb::FloatGrid::Ptr makeGrid(const std::vector<float>& slots, const std::string& name,
+                                     const std::vector<std::uint8_t>* keep = nullptr) const
     {
-        return makeGrid<openvdb::FloatGrid>(slots, name);
+        return makeGrid<openvdb::FloatGrid>(slots, name, keep);
     }
 
 private:

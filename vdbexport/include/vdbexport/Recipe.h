@@ -21,6 +21,27 @@ struct FieldSpec
 {
     std::string path; ///< `path`: field file (VDB, ...); may be empty until the CLI sets it
     std::string grid; ///< `grid`: vector grid name; "" picks the default grid
+    /// `format`: "auto" (by extension) | "vdb" | "npy" | "vti" | "vtk" | "raw"
+    std::string format = "auto";
+    /// `voxel_size`: world units per voxel of a dense input (npy, raw; overrides a VTK file's
+    /// spacing), > 0; null = the file's own, else 1
+    std::optional<double> voxelSize;
+    /// `origin`: world position of voxel (0,0,0)'s centre for dense inputs; null = the file's, else 0
+    std::optional<std::array<double, 3>> origin;
+    /// `shape`: [X, Y, Z] voxels of a raw input (required for raw), each >= 1
+    std::optional<std::array<double, 3>> shape;
+    /// `dtype`: raw input element type: "float32" | "float64" (little-endian), "<f4", "<f8",
+    /// ">f4", ">f8"
+    std::string dtype = "float32";
+    /// `resample`: resample the field to this voxel size, world units, > 0; null = keep
+    std::optional<double> resample;
+    /// `crop`: [[x0,y0,z0],[x1,y1,z1]] world-space box; voxels whose centres lie outside are
+    /// dropped; null = no crop
+    std::optional<std::array<std::array<double, 3>, 2>> crop;
+    /// `mask`: "none" | "zero" (deactivate voxels whose velocity is exactly zero)
+    std::string mask = "none";
+    /// `nan_policy`: "refuse" (NaN/Inf is an error) | "zero" (replace with 0 and go on)
+    std::string nanPolicy = "refuse";
 
     bool operator==(const FieldSpec&) const = default;
 };
@@ -161,7 +182,8 @@ Recipe parseRecipe(const std::string& text, const std::string& source = "recipe"
 Recipe loadRecipeFile(const std::string& path);
 
 /// The allowed values of an enumerated key ("lic.engine", "lic.kernel", "lic.integrator",
-/// "input.type", "input.distribution", "roi.mode", "output.contrast"); empty for other keys.
+/// "input.type", "input.distribution", "roi.mode", "output.contrast", "field.format",
+/// "field.dtype", "field.mask", "field.nan_policy"); empty for other keys.
 const std::vector<std::string>& allowedValues(const std::string& keyPath);
 
 /// The entry of `valid` nearest to `bad` by edit distance (case-insensitive, a transposition

@@ -18,14 +18,19 @@ namespace vdbexport {
 /// how long each stage took.
 ///
 /// Drawing happens only when not `quiet` and `out` is a terminal (or `forceEnabled`, for
-/// tests); stage durations are recorded either way, for the CLI's --json summary.
+/// tests, or Style::Lines, for programs reading a pipe); stage durations are recorded either way, for the CLI's --json summary.
 /// advance() is thread-safe and cheap (atomic counters; at most ~10 redraws a second, a
 /// mutex only around drawing). begin() and end() are called by the thread running the
 /// operation, one stage at a time; a begin() while a stage is open ends that stage first.
 class TerminalProgress : public lic::Progress
 {
 public:
-    explicit TerminalProgress(bool quiet, FILE* out = stderr, bool forceEnabled = false);
+    /// Bar: the redrawn line above, on a terminal. Lines: for programs (the Blender add-on),
+    /// one `progress FRACTION STAGE` line per redraw (FRACTION in [0, 1], -1 when the total is
+    /// unknown), whether or not `out` is a terminal.
+    enum class Style { Bar, Lines };
+
+    explicit TerminalProgress(bool quiet, FILE* out = stderr, bool forceEnabled = false, Style style = Style::Bar);
     /// Ends a half-drawn line (see finishLine()).
     ~TerminalProgress() override;
 
@@ -64,6 +69,7 @@ private:
     void draw(bool final); // mMutex held
 
     FILE* mOut;
+    Style mStyle;
     bool mEnabled;
     std::atomic<bool> mCancel{false};
 

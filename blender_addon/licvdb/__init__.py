@@ -1,0 +1,35 @@
+"""licvdb: import LIC bakes (.vdb) with their look, play loops, bake LIC from smoke simulations.
+
+Blender 3.4+ as a legacy add-on (``bl_info``), 4.2+ as an extension (``blender_manifest.toml``).
+This file only registers; the work is in the modules beside it.
+"""
+
+bl_info = {
+    "name": "licvdb",
+    "author": "licvdb authors",
+    "version": (0, 1, 0),
+    "blender": (3, 4, 0),
+    "location": "File > Import > licvdb bake (.vdb); View3D > Sidebar > licvdb",
+    "description": "Import 3D line integral convolution bakes, build their look, bake LIC from smoke",
+    "category": "Import-Export",
+}
+
+import bpy
+
+from . import manifest, material, ops_bake, ops_import, panel, prefs, props  # noqa: F401 (public modules)
+
+_classes = (*prefs.classes, *props.classes, *ops_import.classes, *ops_bake.classes, *panel.classes)
+
+
+def register():
+    for cls in _classes:
+        bpy.utils.register_class(cls)
+    props.register_properties()
+    bpy.types.TOPBAR_MT_file_import.append(ops_import.menu_import)
+
+
+def unregister():
+    bpy.types.TOPBAR_MT_file_import.remove(ops_import.menu_import)
+    props.unregister_properties()
+    for cls in reversed(_classes):
+        bpy.utils.unregister_class(cls)

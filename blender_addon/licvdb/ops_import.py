@@ -1,0 +1,188 @@
+"""File > Import > licvdb bake (.vdb): one bake, a numbered loop, or several bakes at once."""
+
+import json
+import os
+
+import bpy
+from bpy_extras.io_utils import ImportHelper
+
+from . import manifest as mf
+from mathutils import Matrix, Vector
+
+from . import material, prefs, props
+
+
+#: (brightness, line absorption) for dense (noise) bakes; sparse line bakes keep the panel's
+#: defaults. The radiance of a thick dense region tends to brightness / absorption.
+DENSE_LOOK = (0.6, 1.0)
+
+
+class BakeImportError(Exception):
+    """A bake that cannot be imported; the message says why and what to do."""
+
+
+def bake_files(path: str):
+    """(files in frame order, Manifest or None) for the bake that ``path`` belongs to."""
+    if not os.path.isfile(path):
+        raise BakeImportError(f"{path} does not exist")
+    man = mf.find_manifest(path)
+    if man is not None:
+        missing = [f for f in man.files if not os.path.isfile(f)]
+        if missing:
+            raise BakeImportError(f"{man.path} lists {len(man.files)} files but {len(missing)} are missing "
+                                  f"(first: {missing[0]}); re-run the bake")
+        return man.files, man
+    return mf.sequence_files(path), None
+
+
+def import_bake(context, path: str, frame_start: int | None = None, setup_render: bool = True,
+                name: str | None = None, sequence_mode: str | None = None, files=None):
+    """Create a Volume object for the bake ``path`` belongs to and give it the LIC look.
+
+    Grids stay where licvdb put them in world space: the object has the identity transform, or
+    a −½ voxel translation where Cycles needs it (prefs.half_voxel_shift).
+    A loop (or any numbered sequence) becomes a volume sequence starting at ``frame_start``
+    (default: the scene's start frame); cyclic bakes repeat forever. ``files`` overrides the
+    file list (frames of a sequence baked one by one). Raises BakeImportError.
+    """
+    if files:
+        man = mf.find_manifest(files[0])
+        if man is not None and len(man.files) != len(files):
+            man.cyclic = False  # the manifest of one frame: its grids and colormap still apply
+    else:
+        files, man = bake_files(path)
+    scene = context.scene
+    first = files[0]
+    stem = os.path.splitext(os.path.basename(man.path if man else first))[0]
+    vol = bpy.data.volumes.new(name or stem)
+    vol.filepath = first
+    # Check the first file while the volume is still a single file (a sequence's original
+    # datablock has no frame until the depsgraph evaluates it).
+    if not vol.grids.load():
+        msg = vol.grids.error_message or "unknown error"
+        bpy.data.volumes.remove(vol)
+        raise BakeImportError(f"Blender cannot read {first}: {msg}")
+    loaded = [g.name for g in vol.grids]
+    if "density" not in loaded:
+        bpy.data.volumes.remove(vol)
+        raise BakeImportError(f"{first} has no \"density\" grid (grids: {', '.join(loaded) or 'none'}); "
+                              "is it a licvdb bake?")
+    n = len(files)
+    if n > 1:
+        vol.grids.unload()
+        first_num = mf.frame_number(first) or 1
+        vol.is_sequence = True
+        vol.frame_duration = n
+        vol.frame_start = scene.frame_start if frame_start is None else frame_start
+        # Blender shows file number (scene frame − frame_start + 1, wrapped by the mode) + offset.
+        vol.frame_offset = first_num - 1
+        cyclic = man.cyclic if man else False
+        vol.sequence_mode = sequence_mode or ("REPEAT" if cyclic else "CLIP")
+
+    obj = bpy.data.objects.new(vol.name, vol)
+    context.collection.objects.link(obj)
+    s = obj.licvdb
+    s.is_bake = True
+    s.manifest = man.path if man else ""
+    s.grid_names = ",".join(man.grid_names if man else loaded)
+    s.frames = n
+    s.cyclic = bool(man and man.cyclic)
+    s.voxel_size = (man.voxel_size if man and man.voxel_size > 0 else _voxel_size_guess(man))
+    s.halo_shell = material.halo_shell_voxels(man.recipe if man else {})
+    if man and man.colormap:
+        s.colormap_points = json.dumps(man.colormap.points)
+        s.colormap_name = man.colormap.name
+    if prefs.half_voxel_shift(context):
+        vs = man.grids[0].voxel_size if man and man.grids else (s.voxel_size,) * 3
+        obj.matrix_world = Matrix.Translation(-0.5 * Vector(vs))
+        s.half_voxel_shift = True
+    # Set without triggering a rebuild per property.
+    s["look"] = 1 if "halo" in loaded else 0
+    if man and (man.recipe.get("input") or {}).get("type") == "noise":
+        # Dense LIC fills its whole box: less emission and more absorption, so the streaks on and
+        # just under the surface show instead of a glow summed through the volume.
+        s["brightness"], s["line_absorption"] = DENSE_LOOK
+    props.apply_look(obj)
+
+    for o in context.view_layer.objects:
+        o.select_set(False)
+    obj.select_set(True)
+    context.view_layer.objects.active = obj
+    if setup_render:
+        material.setup_render(scene)
+    return obj
+
+
+def _voxel_size_guess(man) -> float:
+    if man and man.grids:
+        return man.grids[0].voxel_size[0] or 1.0
+    return 1.0
+
+
+def import_paths(context, paths, **kw):
+    """Import every distinct bake among ``paths`` (frames of one loop count once)."""
+    objects, seen = [], set()
+    for p in sorted(paths):
+        files, man = bake_files(p)
+        key = man.path if man else files[0]
+        if key in seen:
+            continue
+        seen.add(key)
+        objects.append(import_bake(context, p, **kw))
+    return objects
+
+
+class LICVDB_OT_import_bake(bpy.types.Operator, ImportHelper):
+    """Import a licvdb bake (.vdb, or a numbered loop) as a volume with the LIC look"""
+
+    bl_idname = "licvdb.import_bake"
+    bl_label = "Import licvdb bake"
+    bl_options = {"REGISTER", "UNDO", "PRESET"}
+
+    filename_ext = ".vdb"
+    filter_glob: bpy.props.StringProperty(default="*.vdb", options={"HIDDEN"})
+    files: bpy.props.CollectionProperty(type=bpy.types.OperatorFileListElement, options={"HIDDEN", "SKIP_SAVE"})
+    directory: bpy.props.StringProperty(subtype="DIR_PATH", options={"HIDDEN", "SKIP_SAVE"})
+    setup_render: bpy.props.BoolProperty(name="Set up render", default=True,
+                                         description="Cycles, black world, volume step, no denoising without OIDN")
+
+    def invoke(self, context, event):
+        if self.filepath or (self.directory and len(self.files)):
+            return self.execute(context)  # drag and drop
+        return ImportHelper.invoke(self, context, event)
+
+    def execute(self, context):
+        paths = [os.path.join(self.directory, f.name) for f in self.files if f.name] if self.directory else []
+        if not paths and self.filepath:
+            paths = [self.filepath]
+        if not paths:
+            self.report({"ERROR"}, "no file given: choose a licvdb .vdb file")
+            return {"CANCELLED"}
+        try:
+            objects = import_paths(context, [bpy.path.abspath(p) for p in paths], setup_render=self.setup_render)
+        except (BakeImportError, mf.ManifestError) as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        self.report({"INFO"}, "imported " + ", ".join(o.name for o in objects))
+        return {"FINISHED"}
+
+
+def menu_import(self, context):
+    self.layout.operator(LICVDB_OT_import_bake.bl_idname, text="licvdb bake (.vdb)")
+
+
+classes = [LICVDB_OT_import_bake]
+
+if hasattr(bpy.types, "FileHandler"):  # Blender 4.1+: drag and drop of .vdb files
+
+    class LICVDB_FH_import_bake(bpy.types.FileHandler):
+        bl_idname = "LICVDB_FH_import_bake"
+        bl_label = "licvdb bake"
+        bl_import_operator = "licvdb.import_bake"
+        bl_file_extensions = ".vdb"
+
+        @classmethod
+        def poll_drop(cls, context):
+            return context.area is not None and context.area.type == "VIEW_3D"
+
+    classes.append(LICVDB_FH_import_bake)

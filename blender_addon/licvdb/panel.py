@@ -1,0 +1,80 @@
+"""The N-panel (3D view sidebar, tab "licvdb"): the look of the active bake, and baking from a
+fluid domain."""
+
+import bpy
+
+from . import ops_bake
+
+
+class LICVDB_PT_look(bpy.types.Panel):
+    bl_label = "LIC look"
+    bl_idname = "LICVDB_PT_look"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "licvdb"
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        return obj is not None and obj.type == "VOLUME" and obj.licvdb.is_bake
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.active_object.licvdb
+        layout.prop(s, "look", expand=True)
+        col = layout.column(align=True)
+        col.prop(s, "brightness")
+        col.prop(s, "line_absorption")
+        row = col.row()
+        row.enabled = s.look == "HALOS"
+        row.prop(s, "halo_strength")
+        if s.look == "HALOS" and "halo" not in s.grid_names.split(","):
+            layout.label(text="This bake has no halo grid", icon="INFO")
+        layout.prop(s, "color_source")
+        mat = context.active_object.active_material
+        ramp = mat.node_tree.nodes.get("colormap") if mat and mat.use_nodes else None
+        if ramp is not None:
+            layout.label(text=f"Colour ramp ({s.colormap_name or 'bake colormap'})")
+            layout.template_color_ramp(ramp, "color_ramp", expand=True)
+        box = layout.box()
+        box.label(text=f"Grids: {s.grid_names.replace(',', ', ')}")
+        if s.frames > 1:
+            box.label(text=f"{s.frames} frames" + (", seamless loop" if s.cyclic else ""))
+        box.label(text=f"Voxel: {s.voxel_size:.4g}")
+
+
+class LICVDB_PT_bake(bpy.types.Panel):
+    bl_label = "Bake LIC from fluid"
+    bl_idname = "LICVDB_PT_bake"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "licvdb"
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.scene.licvdb_bake
+        if ops_bake.fluid_domain(context.active_object) is None:
+            layout.label(text="Select a smoke domain (OpenVDB cache)", icon="INFO")
+        col = layout.column(align=True)
+        col.prop(s, "length")
+        col.prop(s, "upsample")
+        col.prop(s, "kernel")
+        col.prop(s, "seed")
+        col = layout.column(align=True)
+        col.prop(s, "color_scalar")
+        sub = col.row()
+        sub.enabled = s.color_scalar != "NONE"
+        sub.prop(s, "colormap")
+        layout.prop(s, "use_frame_range")
+        if s.use_frame_range:
+            row = layout.row(align=True)
+            row.prop(s, "frame_start")
+            row.prop(s, "frame_end")
+        else:
+            layout.prop(s, "loop_frames")
+        layout.prop(s, "output_dir")
+        layout.prop(s, "threads")
+        layout.operator("licvdb.bake_fluid", icon="RENDER_STILL")
+
+
+classes = (LICVDB_PT_look, LICVDB_PT_bake)

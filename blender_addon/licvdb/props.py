@@ -1,0 +1,124 @@
+"""Per-object look settings (``obj.licvdb``) and per-scene bake settings (``scene.licvdb_bake``)."""
+
+import json
+
+import bpy
+
+from . import material
+
+
+def look_of(obj) -> material.Look:
+    """The Look described by ``obj.licvdb``."""
+    s = obj.licvdb
+    try:
+        cmap = json.loads(s.colormap_points) if s.colormap_points else []
+    except ValueError:
+        cmap = []
+    return material.Look(mode=s.look, brightness=s.brightness, line_absorption=s.line_absorption,
+                         halo_strength=s.halo_strength, color_source=s.color_source, colormap=cmap,
+                         voxel_size=s.voxel_size, halo_shell=s.halo_shell)
+
+
+def grid_names(obj) -> list:
+    return [g for g in obj.licvdb.grid_names.split(",") if g]
+
+
+def lic_material(obj):
+    """The object's LIC material, created (and assigned to slot 0) if missing."""
+    mats = obj.data.materials
+    mat = mats[0] if len(mats) and mats[0] is not None else None
+    if mat is None:
+        mat = bpy.data.materials.new(f"{obj.name} LIC")
+        if len(mats):
+            mats[0] = mat
+        else:
+            mats.append(mat)
+    return mat
+
+
+def apply_look(obj) -> dict:
+    """Rebuild the object's material from its settings; returns build_lic_material's nodes."""
+    return material.build_lic_material(lic_material(obj), grid_names(obj), look_of(obj))
+
+
+def _update(self, context):
+    obj = self.id_data
+    if isinstance(obj, bpy.types.Object) and obj.type == "VOLUME" and self.is_bake:
+        apply_look(obj)
+
+
+LOOKS = [("LINES", "Lines", "Emissive lines only"),
+         ("HALOS", "Lines + halos", "Lines with black absorbing halos: lines behind others show gaps")]
+COLOR_SOURCES = [("AUTO", "Auto", "Scalar + colour ramp if the bake has a colormap, else the color grid, else white"),
+                 ("SCALAR", "Scalar + ramp", "The scalar grid through a colour ramp (lighter in memory)"),
+                 ("COLOR", "Color grid", "The baked vec3 color grid"),
+                 ("WHITE", "White", "Uncoloured lines")]
+
+
+class LICVDB_ObjectSettings(bpy.types.PropertyGroup):
+    is_bake: bpy.props.BoolProperty(name="licvdb bake", default=False)
+    manifest: bpy.props.StringProperty(name="Manifest", subtype="FILE_PATH")
+    grid_names: bpy.props.StringProperty(name="Grids", description="Grids of the bake, comma separated")
+    voxel_size: bpy.props.FloatProperty(name="Voxel size", default=1.0, min=1e-9, precision=5)
+    colormap_points: bpy.props.StringProperty(name="Colormap", description="The bake's colormap points (JSON)")
+    colormap_name: bpy.props.StringProperty(name="Colormap name")
+    halo_shell: bpy.props.FloatProperty(name="Halo shell", default=1.5, min=0.0,
+                                        description="Output voxels from a line's edge to its halo's edge (from the recipe)")
+    frames: bpy.props.IntProperty(name="Frames", default=1, min=1)
+    cyclic: bpy.props.BoolProperty(name="Cyclic", default=False)
+    half_voxel_shift: bpy.props.BoolProperty(name="Half-voxel shift", default=False,
+                                             description="Moved by −½ voxel to correct Cycles' dense-texture offset")
+
+    look: bpy.props.EnumProperty(name="Look", items=LOOKS, default="LINES", update=_update)
+    brightness: bpy.props.FloatProperty(name="Line brightness", default=1.0, min=0.0, soft_max=20.0,
+                                        update=_update)
+    line_absorption: bpy.props.FloatProperty(name="Line absorption", default=0.3, min=0.0, soft_max=5.0,
+                                             update=_update,
+                                             description="How much lines dim what is behind them")
+    halo_strength: bpy.props.FloatProperty(name="Halo strength", default=1.5, min=0.0, soft_max=10.0,
+                                           update=_update,
+                                           description="Absorption of the black shell around each line")
+    color_source: bpy.props.EnumProperty(name="Colour", items=COLOR_SOURCES, default="AUTO", update=_update)
+
+
+SCALARS = [("NONE", "None", "Uncoloured"), ("speed", "Speed", ""), ("vorticity", "Vorticity", "|curl v|"),
+           ("streamwise-vorticity", "Streamwise vorticity", ""), ("helicity", "Helicity", ""),
+           ("q-criterion", "Q criterion", ""), ("density", "Smoke density", "The simulation's density grid"),
+           ("temperature", "Temperature", "The simulation's temperature grid")]
+COLORMAPS = [(n, n, "") for n in ("viridis", "magma", "inferno", "cividis", "heated-object", "red-yellow",
+                                  "grey-purple", "coolwarm")]
+
+
+class LICVDB_BakeSettings(bpy.types.PropertyGroup):
+    length: bpy.props.FloatProperty(name="Length", default=10.0, min=0.5, soft_max=100.0,
+                                    description="Kernel half-length in output voxels")
+    upsample: bpy.props.IntProperty(name="Upsample", default=2, min=1, max=16,
+                                    description="Output voxels per simulation voxel along each axis")
+    kernel: bpy.props.EnumProperty(name="Kernel", items=[("box", "Box", "Symmetric streaks"),
+                                                         ("exp", "Oriented", "Tapered streamlets, bright head downstream")],
+                                   default="box")
+    seed: bpy.props.IntProperty(name="Seed", default=1, min=0)
+    color_scalar: bpy.props.EnumProperty(name="Colour by", items=SCALARS, default="speed")
+    colormap: bpy.props.EnumProperty(name="Colormap", items=COLORMAPS, default="viridis")
+    loop_frames: bpy.props.IntProperty(name="Loop frames", default=1, min=1, max=1000,
+                                       description="> 1: bake one simulation frame as a seamless animated loop")
+    use_frame_range: bpy.props.BoolProperty(name="Frame range", default=False,
+                                            description="Bake every simulation frame of a range, as a sequence")
+    frame_start: bpy.props.IntProperty(name="Start", default=1, min=0)
+    frame_end: bpy.props.IntProperty(name="End", default=10, min=0)
+    output_dir: bpy.props.StringProperty(name="Output", subtype="DIR_PATH", default="",
+                                         description="Where bakes go; empty = a licvdb folder in the fluid cache")
+    threads: bpy.props.IntProperty(name="Threads", default=0, min=0, max=1024, description="0 = all cores")
+
+
+classes = (LICVDB_ObjectSettings, LICVDB_BakeSettings)
+
+
+def register_properties():
+    bpy.types.Object.licvdb = bpy.props.PointerProperty(type=LICVDB_ObjectSettings)
+    bpy.types.Scene.licvdb_bake = bpy.props.PointerProperty(type=LICVDB_BakeSettings)
+
+
+def unregister_properties():
+    del bpy.types.Scene.licvdb_bake
+    del bpy.types.Object.licvdb

@@ -1,0 +1,53 @@
+"""Fixtures for the tests that run inside Blender (see run.py)."""
+
+import json
+import os
+import subprocess
+
+import addon_utils
+import bpy
+import pytest
+
+ADDON = "licvdb"
+
+
+def licvdb_exe() -> str:
+    exe = os.environ.get("LICVDB_EXECUTABLE", "")
+    assert os.path.isfile(exe), f"LICVDB_EXECUTABLE={exe!r} is not a file (run through tests/blender/run.py)"
+    return exe
+
+
+def run_licvdb(*args, cwd=None) -> str:
+    """Run licvdb, fail the test with its stderr if it fails; returns stdout."""
+    proc = subprocess.run([licvdb_exe(), *map(str, args)], cwd=cwd, capture_output=True, text=True)
+    assert proc.returncode == 0, f"licvdb {' '.join(map(str, args))} failed ({proc.returncode}): {proc.stderr}"
+    return proc.stdout
+
+
+def enable_addon():
+    if ADDON not in bpy.context.preferences.addons:
+        addon_utils.enable(ADDON, default_set=True, handle_error=None)
+    assert ADDON in bpy.context.preferences.addons, "the licvdb add-on did not enable"
+
+
+@pytest.fixture(autouse=True)
+def factory_scene():
+    """Every test starts from an empty factory scene with the add-on enabled."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    enable_addon()
+    yield
+
+
+@pytest.fixture(scope="session")
+def bakes(tmp_path_factory):
+    """A 24³ ABC field, a still bake coloured by speed, and a 4-frame cyclic loop."""
+    d = tmp_path_factory.mktemp("bakes")
+    field = d / "abc.vdb"
+    run_licvdb("field", "abc", "--res", "24,24,24", "--out", field, "--quiet")
+    still = d / "still.vdb"
+    run_licvdb("bake", "--field", field, "--out", still, "--color", "speed", "--colormap", "viridis",
+               "--length", "8", "--quiet")
+    loop = d / "loop.vdb"
+    run_licvdb("bake", "--field", field, "--out", loop, "--frames", "4", "--length", "8", "--quiet")
+    info = json.loads(run_licvdb("info", field, "--json"))
+    return {"dir": d, "field": field, "still": still, "loop": loop, "field_info": info}

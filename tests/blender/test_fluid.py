@@ -1,0 +1,247 @@
+"""licvdb.bake_fluid end to end on a tiny smoke simulation baked in the test."""
+
+import glob
+import os
+import time
+
+import bpy
+import numpy as np
+import pytest
+from mathutils import Matrix, Vector
+
+from conftest import licvdb_exe, run_licvdb
+from licvdb import ops_bake
+
+RES = 16
+DOMAIN_LOC = (0.3, -0.2, 0.5)  # a size-2 cube: local box [-1, 1]³
+SPHERE_LOC = (0.45, -0.35, -0.1)
+FRAMES = 4
+
+
+def make_smoke(cache_dir):
+    """A gas domain (res 16, OpenVDB cache) with a smoke inflow; simulates frames 1..4 (the
+    replay cache writes fluid_data_NNNN.vdb as the frames are evaluated). Returns the domain."""
+    scene = bpy.context.scene
+    bpy.ops.mesh.primitive_cube_add(size=2, location=DOMAIN_LOC)
+    dom = bpy.context.active_object
+    dom.name = "Smoke Domain"
+    mod = dom.modifiers.new("Fluid", "FLUID")
+    mod.fluid_type = "DOMAIN"
+    ds = mod.domain_settings
+    ds.domain_type = "GAS"
+    ds.resolution_max = RES
+    ds.cache_directory = str(cache_dir)
+    ds.cache_data_format = "OPENVDB"
+    ds.cache_type = "REPLAY"
+    ds.cache_frame_start, ds.cache_frame_end = 1, FRAMES
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=SPHERE_LOC)
+    flow = bpy.context.active_object
+    fm = flow.modifiers.new("Fluid", "FLUID")
+    fm.fluid_type = "FLOW"
+    fs = fm.flow_settings
+    fs.flow_type = "SMOKE"
+    fs.flow_behavior = "INFLOW"
+    fs.use_initial_velocity = True
+    fs.velocity_coord = (0.0, 0.0, 1.5)
+    scene.frame_start, scene.frame_end = 1, FRAMES
+    for f in range(1, FRAMES + 1):
+        scene.frame_set(f)
+    for f in range(1, FRAMES + 1):
+        assert os.path.isfile(ops_bake.cache_data_file(ds, f)), f"simulation did not write frame {f}"
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    dom.select_set(True)
+    bpy.context.view_layer.objects.active = dom
+    return dom
+
+
+@pytest.fixture
+def smoke(tmp_path):
+    dom = make_smoke(tmp_path / "cache")
+    s = bpy.context.scene.licvdb_bake
+    s.length = 6.0
+    s.upsample = 2
+    s.color_scalar = "speed"
+    s.output_dir = str(tmp_path / "out")
+    return dom
+
+
+def test_cache_velocity_grid_is_readable(smoke):
+    """What mantaflow writes in Blender 3.4: a vec3s `velocity` grid of class staggered, stored as
+    half floats, active where there is smoke; licvdb reads it."""
+    import pyopenvdb as vdb
+
+    path = ops_bake.cache_data_file(ops_bake.fluid_domain(smoke), 3)
+    meta = {g.name: g for g in vdb.readAllGridMetadata(path)}
+    assert "velocity" in meta and "density" in meta
+    vel = meta["velocity"]
+    assert vel.valueTypeName == "vec3s"
+    assert vel.gridClass == "staggered"
+    assert vel["is_saved_as_half_float"] is True
+    info = run_licvdb("info", path, "--json")
+    assert '"velocity"' in info
+
+
+def test_placement_of_cache_coordinates(smoke):
+    """domain_placement puts the cache's density where the emitter is (mantaflow writes cell i at
+    i × cell, Blender's cell i covers [lower + i·cell, lower + (i+1)·cell])."""
+    import pyopenvdb as vdb
+
+    ds = ops_bake.fluid_domain(smoke)
+    g = vdb.read(ops_bake.cache_data_file(ds, 1), "density")
+    cell = 2.0 / RES
+    assert g.transform.voxelSize()[0] == pytest.approx(cell)
+    dense = np.zeros((RES, RES, RES), np.float32)
+    g.copyToArray(dense, ijk=(0, 0, 0))
+    idx = np.stack(np.meshgrid(*[np.arange(RES)] * 3, indexing="ij"), axis=-1)
+    centroid = (idx * dense[..., None]).sum(axis=(0, 1, 2)) / dense.sum()
+    world = ops_bake.domain_placement(smoke, ds, cell) @ Vector(centroid * cell)
+    # x and y are symmetric about the sphere's centre (the inflow pushes z up).
+    assert world.x == pytest.approx(SPHERE_LOC[0], abs=0.25 * cell), world
+    assert world.y == pytest.approx(SPHERE_LOC[1], abs=0.25 * cell), world
+
+
+def test_bake_fluid_current_frame(smoke, tmp_path):
+    bpy.context.scene.frame_set(3)
+    t0 = time.monotonic()
+    assert bpy.ops.licvdb.bake_fluid() == {"FINISHED"}
+    seconds = time.monotonic() - t0
+    obj = bpy.context.active_object
+    assert obj.type == "VOLUME" and obj.licvdb.is_bake and obj is not smoke
+    vol = obj.data
+    assert not vol.is_sequence
+    assert vol.grids.load()
+    assert {"density", "color", "scalar"} <= {g.name for g in vol.grids}
+    assert os.path.basename(vol.filepath).endswith("_f0003.vdb")
+    assert os.path.dirname(bpy.path.abspath(vol.filepath)) == str(tmp_path / "out")
+    # Placed on the domain: the object's matrix is the cache → world placement (plus the
+    # half-voxel correction), so the LIC lies inside the domain.
+    ds = ops_bake.fluid_domain(smoke)
+    out_voxel = (2.0 / RES) / 2
+    shift = -0.5 * out_voxel if obj.licvdb.half_voxel_shift else 0.0
+    expected = ops_bake.domain_placement(smoke, ds, 2.0 / RES) @ Matrix.Translation((shift,) * 3)
+    for a in range(4):
+        for b in range(4):
+            assert obj.matrix_world[a][b] == pytest.approx(expected[a][b], abs=1e-5)
+    corners = [obj.matrix_world @ Vector(c) for c in obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).bound_box]
+    for a in range(3):
+        lo, hi = DOMAIN_LOC[a] - 1.0, DOMAIN_LOC[a] + 1.0
+        assert all(lo - 1e-4 <= c[a] <= hi + 1e-4 for c in corners), (a, corners)
+    # The look was built for the bake: colour through the ramp, only the Volume output linked.
+    nodes = obj.active_material.node_tree.nodes
+    assert "colormap" in nodes
+    print(f"bake_fluid: one frame of a {RES}³ smoke domain baked and imported in {seconds:.2f} s")
+
+
+def test_bake_fluid_frame_range_is_a_sequence(smoke):
+    s = bpy.context.scene.licvdb_bake
+    s.use_frame_range = True
+    s.frame_start, s.frame_end = 2, 4
+    s.color_scalar = "NONE"
+    assert bpy.ops.licvdb.bake_fluid() == {"FINISHED"}
+    obj = bpy.context.active_object
+    vol = obj.data
+    assert vol.is_sequence and vol.frame_duration == 3 and vol.sequence_mode == "CLIP"
+    assert vol.frame_start == 2
+    bpy.context.scene.frame_set(3)
+    grids = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data.grids
+    assert grids.frame == 3 and grids.frame_filepath.endswith("_0003.vdb")
+    assert grids.is_loaded or grids.load()
+
+
+def test_bake_fluid_one_frame_as_a_loop(smoke):
+    s = bpy.context.scene.licvdb_bake
+    s.loop_frames = 3
+    s.color_scalar = "NONE"
+    bpy.context.scene.frame_start = 10
+    bpy.context.scene.frame_set(4)
+    assert bpy.ops.licvdb.bake_fluid() == {"FINISHED"}
+    vol = bpy.context.active_object.data
+    assert vol.is_sequence and vol.frame_duration == 3 and vol.sequence_mode == "REPEAT"
+    assert vol.frame_start == 10
+    assert os.path.basename(vol.filepath).endswith("_f0004_0001.vdb")
+
+
+def test_bake_fluid_errors_are_reported(smoke, tmp_path):
+    prefs = bpy.context.preferences.addons["licvdb"].preferences
+    s = bpy.context.scene.licvdb_bake
+    # A frame the simulation has not cached.
+    bpy.context.scene.frame_set(FRAMES + 5)
+    with pytest.raises(RuntimeError, match="bake the simulation first"):
+        bpy.ops.licvdb.bake_fluid()
+    bpy.context.scene.frame_set(2)
+    # A missing executable says where to set it.
+    prefs.executable = str(tmp_path / "no-such-licvdb")
+    try:
+        with pytest.raises(RuntimeError, match="Preferences > Add-ons > licvdb"):
+            bpy.ops.licvdb.bake_fluid()
+    finally:
+        prefs.executable = ""
+    # A bake licvdb refuses (length beyond the recipe's maximum): its message, and nothing left.
+    s.length = 20000.0
+    with pytest.raises(RuntimeError, match="licvdb bake failed for frame 2.*length"):
+        bpy.ops.licvdb.bake_fluid()
+    assert not glob.glob(str(tmp_path / "out" / "*.vdb"))
+    # A bake that outlives the operator's timeout is cancelled and reported; nothing is left.
+    s.length = 6.0
+    with pytest.raises(RuntimeError, match="longer than"):
+        bpy.ops.licvdb.bake_fluid(timeout=0.02)
+    assert not glob.glob(str(tmp_path / "out" / "*"))
+    # Not a fluid domain.
+    bpy.ops.mesh.primitive_cube_add()
+    with pytest.raises(RuntimeError, match="poll"):
+        bpy.ops.licvdb.bake_fluid()
+
+
+def test_bake_job_cancel_leaves_no_files(tmp_path):
+    """Esc in the modal operator calls BakeJob.cancel(): licvdb is interrupted (SIGINT) and
+    nothing is written."""
+    field = tmp_path / "big.vdb"
+    run_licvdb("field", "abc", "--res", "48,48,48", "--out", field, "--quiet")
+    out = tmp_path / "out"
+    out.mkdir()
+    recipe = {"field": {"path": str(field)}, "output": {"path": str(out / "big_lic.vdb"), "upsample": 4},
+              "lic": {"length": 30, "engine": "naive"}, "threads": 1}
+    job = ops_bake.BakeJob(licvdb_exe(), [("frame 1", recipe), ("frame 2", dict(recipe))])
+    job.start()
+    # Progress arrives as licvdb works (--progress lines), before the bake is done.
+    t0 = time.monotonic()
+    while not [f for _, f in job.progress_seen if f > 0.0] and time.monotonic() - t0 < 20.0:
+        assert not job.poll(), "the bake finished before it could be cancelled; make it bigger"
+        job.fraction
+        time.sleep(0.05)
+    assert 0.0 < job.fraction < 0.5, (job.fraction, job.progress_seen)
+    assert "frame 1 (1/2, " in job.status()
+    t0 = time.monotonic()
+    job.cancel()
+    assert job.proc.returncode is not None
+    assert time.monotonic() - t0 < 5.0, "licvdb did not stop on SIGINT"
+    assert job.proc.returncode == 1  # licvdb's "cancelled; no output written", not a kill
+    assert job.cancelled and job.finished
+    assert os.listdir(out) == []
+    assert not os.path.exists(job.workdir)
+
+
+def test_licvdb_progress_lines(tmp_path):
+    """`licvdb bake --progress lines` (what the add-on runs) prints `progress FRACTION STAGE` lines
+    on stderr even though it is not a terminal, ending each stage at 1."""
+    import subprocess
+
+    field = tmp_path / "f.vdb"
+    run_licvdb("field", "abc", "--res", "16,16,16", "--out", field, "--quiet")
+    proc = subprocess.run([licvdb_exe(), "bake", "--field", str(field), "--out", str(tmp_path / "o.vdb"),
+                           "--progress", "lines", "--json"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    lines = [l.split(" ", 2) for l in proc.stderr.splitlines() if l.startswith("progress ")]
+    assert lines, proc.stderr
+    fractions = [float(f) for _, f, _ in lines]
+    assert all(f == -1.0 or 0.0 <= f <= 1.0 for f in fractions)
+    assert fractions[-1] == 1.0
+    stages = {s for _, _, s in lines}
+    assert stages and all(s.strip() for s in stages)
+    quiet = subprocess.run([licvdb_exe(), "bake", "--field", str(field), "--out", str(tmp_path / "q.vdb"),
+                            "--progress", "lines", "--quiet"], capture_output=True, text=True)
+    assert quiet.returncode == 0 and "progress" not in quiet.stderr
+    bad = subprocess.run([licvdb_exe(), "bake", "--field", str(field), "--out", str(tmp_path / "b.vdb"),
+                          "--progress", "dots"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "--progress" in bad.stderr

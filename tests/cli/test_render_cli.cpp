@@ -1,0 +1,272 @@
+// End-to-end tests of `licvdb render`: the built binary (LICVDB_EXE) renders small bakes made by
+// `licvdb field` + `licvdb bake` once per suite; each test runs in a fresh directory and checks
+// exit codes, messages, the --json summary and the images written (read back with OIIO).
+#include <gtest/gtest.h>
+
+#include "vdbexport/ImageIO.h"
+
+#include <nlohmann/json.hpp>
+
+#include <atomic>
+#include <cctype>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+struct RunResult
+{
+    int code = -1;
+    std::string out, err, command;
+    std::string describe() const
+    {
+        return "command: " + command + "\nexit: " + std::to_string(code) + "\n--- stdout ---\n" + out +
+               "\n--- stderr ---\n" + err + "\n";
+    }
+};
+
+std::string shellQuote(const std::string& s)
+{
+    std::string q = "'";
+    for (char c : s) {
+        if (c == '\'') q += "'\\''";
+        else q += c;
+    }
+    return q + "'";
+}
+
+std::string readText(const fs::path& p)
+{
+    std::ifstream in(p, std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+}
+
+std::string lower(std::string s)
+{
+    for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return s;
+}
+
+/// Run licvdb with `args` in `dir`, capturing stdout/stderr into `logs`.
+RunResult runIn(const fs::path& dir, const fs::path& logs, const std::vector<std::string>& args)
+{
+    static std::atomic<int> n{0};
+    const int k = n++;
+    const fs::path outFile = logs / ("stdout." + std::to_string(k)), errFile = logs / ("stderr." + std::to_string(k));
+    RunResult r;
+    r.command = shellQuote(LICVDB_EXE);
+    for (const auto& a : args) r.command += " " + shellQuote(a);
+    const std::string cmd = "cd " + shellQuote(dir.string()) + " && " + r.command + " </dev/null >" +
+                            shellQuote(outFile.string()) + " 2>" + shellQuote(errFile.string());
+    const int status = std::system(cmd.c_str());
+    if (status != -1 && WIFEXITED(status)) r.code = WEXITSTATUS(status);
+    r.out = readText(outFile);
+    r.err = readText(errFile);
+    return r;
+}
+
+class RenderCli : public ::testing::Test
+{
+protected:
+    // Shared inputs: a 12³ abc field, a bake with tangent and colour, a 2-frame loop.
+    static void SetUpTestSuite()
+    {
+        sShared = fs::temp_directory_path() / ("licvdb_test_render_cli_" + std::to_string(::getpid()));
+        fs::remove_all(sShared);
+        fs::create_directories(sShared / "logs");
+        auto must = [](const RunResult& r) {
+            if (r.code != 0) {
+                std::cerr << r.describe();
+                std::abort();
+            }
+        };
+        must(runIn(sShared, sShared / "logs", {"field", "abc", "--res", "12,12,12", "--out", "abc.vdb", "--quiet"}));
+        must(runIn(sShared, sShared / "logs",
+                   {"bake", "--field", "abc.vdb", "--out", "lic.vdb", "--length", "4", "--write-tangent", "--color",
+                    "speed", "--quiet"}));
+        must(runIn(sShared, sShared / "logs",
+                   {"bake", "--field", "abc.vdb", "--out", "loop.vdb", "--length", "4", "--frames", "2", "--quiet"}));
+    }
+    static void TearDownTestSuite() { fs::remove_all(sShared); }
+
+    void SetUp() override
+    {
+        static std::atomic<int> counter{0};
+        mDir = sShared / ("t" + std::to_string(counter++));
+        fs::create_directories(mDir);
+    }
+
+    RunResult run(const std::vector<std::string>& args) { return runIn(mDir, sShared / "logs", args); }
+    static std::string shared(const std::string& name) { return (sShared / name).string(); }
+    fs::path out(const std::string& name) const { return mDir / name; }
+    std::set<std::string> files() const
+    {
+        std::set<std::string> s;
+        for (const auto& e : fs::directory_iterator(mDir)) s.insert(e.path().filename().string());
+        return s;
+    }
+
+    static fs::path sShared;
+    fs::path mDir;
+};
+
+fs::path RenderCli::sShared;
+
+double sum(const lic::Image& img)
+{
+    double s = 0;
+    for (std::size_t i = 0; i < img.rgba.size(); i += 4) s += img.rgba[i] + img.rgba[i + 1] + img.rgba[i + 2];
+    return s;
+}
+
+} // namespace
+
+TEST_F(RenderCli, PngWithJsonSummary)
+{
+    const RunResult r = run({"render", shared("lic.vdb"), "--out", "a.png", "--size", "64,48", "--json", "--threads", "2"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    const json j = json::parse(r.out);
+    ASSERT_EQ(j["files"].size(), 1u);
+    EXPECT_EQ(j["files"][0], "a.png");
+    const json& c = j["camera"];
+    for (const char* k : {"position", "forward", "up", "right", "target", "fov_y_degrees", "fov_x_degrees", "distance"})
+        EXPECT_TRUE(c.contains(k)) << k << "\n" << r.out;
+    EXPECT_EQ(c["projection"], "perspective");
+    EXPECT_EQ(c["image_size"], json::array({64, 48}));
+    EXPECT_EQ(c["forward"], json::array({0.0, 1.0, 0.0})) << "default front view";
+    EXPECT_TRUE(c["blender"].contains("matrix_world"));
+    EXPECT_TRUE(j["illuminated"].get<bool>()) << "the bake has a tangent grid";
+    EXPECT_TRUE(j["colored"].get<bool>()) << "the bake has a color grid";
+    EXPECT_FALSE(j["halos"].get<bool>()) << "a noise bake has no halo grid";
+    EXPECT_GT(j["seconds"]["render"].get<double>(), 0.0);
+    const lic::Image img = vdbexport::readImage(out("a.png").string());
+    EXPECT_EQ(img.width, 64);
+    EXPECT_EQ(img.height, 48);
+    EXPECT_GT(sum(img), 10.0) << "the image must show something";
+    // Without --json: a message on stderr, nothing on stdout.
+    const RunResult q = run({"render", shared("lic.vdb"), "--out", "b.png", "--size", "16,16"});
+    ASSERT_EQ(q.code, 0) << q.describe();
+    EXPECT_TRUE(q.out.empty());
+    EXPECT_NE(q.err.find("b.png"), std::string::npos) << q.describe();
+}
+
+TEST_F(RenderCli, ExrOrthographicViewsAndThreadDeterminism)
+{
+    RunResult r = run({"render", shared("lic.vdb"), "--out", "t1.exr", "--size", "40,30", "--view", "top", "--ortho",
+                       "--threads", "1", "--json"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    const json j = json::parse(r.out);
+    EXPECT_EQ(j["camera"]["projection"], "orthographic");
+    EXPECT_TRUE(j["camera"].contains("ortho_width"));
+    EXPECT_EQ(j["camera"]["forward"], json::array({0.0, 0.0, -1.0}));
+    r = run({"render", shared("lic.vdb"), "--out", "t2.exr", "--size", "40,30", "--view", "top", "--ortho", "--threads", "2"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    std::string cs;
+    const lic::Image a = vdbexport::readImage(out("t1.exr").string(), &cs), b = vdbexport::readImage(out("t2.exr").string());
+    EXPECT_EQ(cs, "Linear");
+    ASSERT_EQ(a.rgba.size(), b.rgba.size());
+    EXPECT_EQ(a.rgba, b.rgba) << "bit-identical for 1 and 2 threads";
+    EXPECT_GT(sum(a), 1.0);
+    // Azimuth/elevation override the view.
+    r = run({"render", shared("lic.vdb"), "--out", "c.exr", "--size", "8,8", "--view", "right", "--elevation", "30", "--json"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    const json k = json::parse(r.out);
+    EXPECT_DOUBLE_EQ(k["camera"]["azimuth_degrees"].get<double>(), 90.0);
+    EXPECT_DOUBLE_EQ(k["camera"]["elevation_degrees"].get<double>(), 30.0);
+}
+
+TEST_F(RenderCli, StereoSideBySideAndAnaglyph)
+{
+    RunResult r = run({"render", shared("lic.vdb"), "--out", "s.png", "--size", "32,24", "--stereo", "sbs", "--json"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    const json j = json::parse(r.out);
+    EXPECT_EQ(j["image_size"], json::array({64, 24}));
+    EXPECT_TRUE(j["stereo"]["left"].contains("position"));
+    lic::Image img = vdbexport::readImage(out("s.png").string());
+    EXPECT_EQ(img.width, 64);
+    EXPECT_EQ(img.height, 24);
+    r = run({"render", shared("lic.vdb"), "--out", "a.png", "--size", "32,24", "--stereo", "anaglyph"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    img = vdbexport::readImage(out("a.png").string());
+    EXPECT_EQ(img.width, 32);
+    EXPECT_EQ(img.height, 24);
+}
+
+TEST_F(RenderCli, SequencesManifestsAndGif)
+{
+    RunResult r = run({"render", shared("loop_0001.vdb"), "--frames", "2", "--out", "seq.png", "--size", "16,12", "--gif"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    EXPECT_EQ(files(), (std::set<std::string>{"seq_0001.png", "seq_0002.png", "seq.gif"}));
+    r = run({"render", shared("loop.json"), "--out", "m.exr", "--size", "16,12", "--json"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    const json j = json::parse(r.out);
+    EXPECT_EQ(j["frames"], 2);
+    EXPECT_TRUE(fs::exists(out("m_0001.exr")));
+    EXPECT_TRUE(fs::exists(out("m_0002.exr")));
+    // The two frames of a loop differ.
+    EXPECT_NE(vdbexport::readImage(out("m_0001.exr").string()).rgba, vdbexport::readImage(out("m_0002.exr").string()).rgba);
+    // A missing frame is an input error and writes nothing.
+    r = run({"render", shared("loop_0001.vdb"), "--frames", "3", "--out", "x.png", "--size", "8,8"});
+    EXPECT_EQ(r.code, 2) << r.describe();
+    EXPECT_NE(r.err.find("loop_0003.vdb"), std::string::npos) << r.describe();
+    EXPECT_FALSE(fs::exists(out("x_0001.png")));
+}
+
+TEST_F(RenderCli, BadInputExitsTwoWithAMessageAndNoFile)
+{
+    std::ofstream(out("text.vdb")) << "this is not a vdb file\n";
+    struct Case
+    {
+        std::vector<std::string> args;
+        std::string expect; // lower-case substring of stderr
+    };
+    const std::vector<Case> cases = {
+        {{"render", "missing.vdb", "--out", "o.png"}, "missing.vdb"},
+        {{"render", "text.vdb", "--out", "o.png"}, "vdb"},
+        {{"render", shared("abc.vdb"), "--out", "o.png"}, "density"},
+        {{"render", shared("lic.vdb"), "--out", "o.png", "--size", "12x3"}, "--size"},
+        {{"render", shared("lic.vdb"), "--out", "o.png", "--size", "0,10"}, "--size"},
+        {{"render", shared("lic.vdb"), "--out", "o.png", "--size", "1,2,3"}, "--size"},
+        {{"render", shared("lic.vdb"), "--out", "o.png", "--view", "side"}, "side"},
+        {{"render", shared("lic.vdb"), "--out", "nodir/o.png"}, "does not exist"},
+        {{"render", shared("lic.vdb"), "--out", "o.bmpx"}, "extension"},
+        {{"render", shared("lic.vdb"), "--out", "o.png", "--halos", "maybe"}, "--halos"},
+        {{"render", shared("lic.vdb"), "--out", "o.png", "--light", "1,2"}, "--light"},
+        {{"render", shared("lic.vdb"), "--out", "o.png", "--stereo", "3d"}, "stereo"},
+        {{"render", shared("lic.vdb"), "--out", "o.png", "--colormap", "jet"}, "jet"},
+        {{"render", shared("lic.vdb"), "--out", "o.png", "--density-scale", "-1"}, "density scale"},
+        {{"render", shared("lic.vdb"), "--out", "o.png", "--view-transform", "agx"}, "agx"},
+    };
+    for (const auto& c : cases) {
+        const RunResult r = run(c.args);
+        EXPECT_EQ(r.code, 2) << r.describe();
+        EXPECT_NE(lower(r.err).find(lower(c.expect)), std::string::npos) << "expected \"" << c.expect << "\"\n" << r.describe();
+        EXPECT_EQ(files(), (std::set<std::string>{"text.vdb"})) << r.describe();
+    }
+    // The file without density names the grids it has.
+    const RunResult r = run({"render", shared("abc.vdb"), "--out", "o.png"});
+    EXPECT_NE(r.err.find("velocity"), std::string::npos) << r.describe();
+}
+
+TEST_F(RenderCli, HelpListsRender)
+{
+    RunResult r = run({"help", "render"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    EXPECT_NE(r.out.find("--halos"), std::string::npos);
+    EXPECT_NE(r.out.find("--stereo"), std::string::npos);
+    r = run({"help"});
+    EXPECT_NE(r.out.find("render"), std::string::npos);
+}
