@@ -355,6 +355,9 @@ TEST(LegacyVtk, AsciiAndBinary)
     expectInputError([&] { parseLegacyVtk(head + "ASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 100000 100000 100000\n", "h.vtk"); },
                      {"too large"});
     expectInputError([&] { parseLegacyVtk(head + "ASCII\nDATASET POLYDATA\n", "p.vtk"); }, {"STRUCTURED_POINTS"});
+    // Found by fuzz_vti: a POINT_DATA count far beyond int64 was cast to an integer for the message.
+    expectInputError([&] { parseLegacyVtk(head + "ASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 2 2 2\nPOINT_DATA 8.9e91\n", "n.vtk"); },
+                     {"does not match DIMENSIONS"});
     expectInputError([&] { parseLegacyVtk("solid cube\n", "s.vtk"); }, {"not a legacy VTK"});
 }
 

@@ -582,3 +582,11 @@ TEST(RecipeField, ErrorsNameTheKey)
     EXPECT_NE(invalid(R"({"field": {"format": "vtu"}})").find("field.format"), std::string::npos);
     EXPECT_NE(invalid(R"({"field": {"dtype": "float16"}})").find("field.dtype"), std::string::npos);
 }
+
+// Found by fuzz_recipe: a number too large for a double is an out_of_range error in
+// nlohmann::json, not a parse_error; it must still be a bad-input error.
+TEST(RecipeField, HugeNumberIsInvalidJson)
+{
+    const std::string msg = inputError([] { vdbexport::parseRecipe("{\"lic\": {\"length\": 1e999999}}", "big.json"); });
+    EXPECT_NE(msg.find("big.json: invalid JSON"), std::string::npos) << msg;
+}

@@ -32,6 +32,20 @@ extern "C" void onInterrupt(int)
     if (gProgress) gProgress->requestCancel();
 }
 
+/// Ends the progress line and clears gProgress when the scope of the TerminalProgress it points
+/// to is left, also by an exception (the catch handlers in main() run after that scope is gone).
+struct ProgressGuard
+{
+    ProgressGuard() = default;
+    ProgressGuard(const ProgressGuard&) = delete;
+    ProgressGuard& operator=(const ProgressGuard&) = delete;
+    ~ProgressGuard()
+    {
+        if (gProgress) gProgress->finishLine();
+        gProgress = nullptr;
+    }
+};
+
 struct Common
 {
     bool quiet = false;
@@ -226,7 +240,7 @@ int main(int argc, char** argv)
     render->add_option("--halos", rflags.halos, "on|off: halo compositing when the file has a `halo` grid [on]");
     render->add_option("--halo-strength", rjob.settings.haloStrength, "Opacity added at a halo exit per unit of its max halo [1]");
     render->add_option("--halo-threshold", rjob.settings.haloThreshold, "A ray is inside a halo where halo > this [0.05]");
-    render->add_option("--density-scale", rjob.settings.densityScale, "Extinction per unit density per voxel length [1]");
+    render->add_option("--density-scale", rjob.settings.densityScale, "Extinction per unit density per voxel length [auto: 2 with a halo grid, else fit]");
     render->add_option("--density-range", rflags.densityRange, "LO,HI transfer window on density [0,1]");
     render->add_option("--brightness", rjob.settings.brightness, "Emission multiplier [1]");
     render->add_option("--step", rjob.settings.step, "Ray step, voxels [0.5]");
@@ -247,7 +261,7 @@ int main(int argc, char** argv)
         "Examples:\n"
         "  licvdb render jet_lic.vdb --out jet.png\n"
         "  licvdb render jet_lic.vdb --out jet.exr --view right --elevation 20 --size 1920,1080\n"
-        "  licvdb render jet_lic.vdb --out jet.png --halos off --density-scale 0.3 --view-transform filmic\n"
+        "  licvdb render jet_lic.vdb --out jet.png --density-range 0.6,1 --view-transform filmic\n"
         "  licvdb render jet_lic.vdb --out jet_sbs.png --stereo sbs\n"
         "  licvdb render loop_0001.vdb --frames 24 --out loop.png --gif     # loop_0001.png … + loop.gif\n"
         "See docs/render.md for the algorithm, the transfer function and the --json camera.\n");
@@ -316,6 +330,7 @@ int main(int argc, char** argv)
             rjob.settings.emptySpaceSkipping = !rNoSkip;
             vdbexport::TerminalProgress progress(renderCommon.quiet, stderr, false, renderCommon.progressStyle());
             gProgress = &progress;
+            const ProgressGuard progressGuard; // declared after `progress`, so destroyed first
             std::signal(SIGINT, onInterrupt);
             const nlohmann::json summary = vdbexport::render(rjob, progress);
             progress.finishLine();
@@ -435,6 +450,7 @@ int main(int argc, char** argv)
 
             vdbexport::TerminalProgress progress(bakeCommon.quiet, stderr, false, bakeCommon.progressStyle());
             gProgress = &progress;
+            const ProgressGuard progressGuard; // declared after `progress`, so destroyed first
             std::signal(SIGINT, onInterrupt);
             const nlohmann::json summary = vdbexport::bake(r, progress);
             progress.finishLine();

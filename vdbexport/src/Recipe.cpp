@@ -582,6 +582,11 @@ Recipe parseRecipe(const std::string& text, const std::string& source)
         if (const auto pos = reason.find(": "); pos != std::string::npos) reason = reason.substr(pos + 2);
         throw lic::InputError(source + ": invalid JSON at line " + std::to_string(line) + ", column " +
             std::to_string(std::max<std::size_t>(column, 1)) + ": " + reason);
+    } catch (const json::exception& e) {
+        // Not a syntax error but a value the parser cannot hold (a number out of range, ...).
+        std::string reason = e.what();
+        if (const auto pos = reason.find("] "); pos != std::string::npos) reason = reason.substr(pos + 2);
+        throw lic::InputError(source + ": invalid JSON: " + reason);
     }
     Recipe r = Recipe::fromJson(j, source);
     try {

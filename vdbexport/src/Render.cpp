@@ -56,7 +56,7 @@ openvdb::Vec3SGrid::Ptr readVec3(detail::VdbReader& reader, const std::string& p
     throw lic::InputError("grid '" + name + "' in " + quote(path) + " is " + type + "; expected a vec3s grid");
 }
 
-LoadedVolume loadVolume(const std::string& path, bool wantHalo, bool wantScalar)
+LoadedVolume loadVolume(const std::string& path, bool wantHalo, bool wantScalar, bool wantTangent)
 {
     openvdb::initialize();
     detail::VdbReader reader(path);
@@ -74,9 +74,10 @@ LoadedVolume loadVolume(const std::string& path, bool wantHalo, bool wantScalar)
     out.volume.density = readFloat(reader, path, "density", dt);
     // Always read `halo` when present: with --halos off it still marks a line bake (auto density scale).
     if (wantHalo && !typeOf("halo").empty()) out.volume.halo = readFloat(reader, path, "halo", typeOf("halo"));
-    if (!typeOf("color").empty()) out.volume.color = readVec3(reader, path, "color", typeOf("color"));
+    // A colormap over `scalar` replaces `color`: do not read it then.
+    if (!wantScalar && !typeOf("color").empty()) out.volume.color = readVec3(reader, path, "color", typeOf("color"));
     if (wantScalar && !typeOf("scalar").empty()) out.volume.scalar = readFloat(reader, path, "scalar", typeOf("scalar"));
-    if (!typeOf("tangent").empty()) out.volume.tangent = readVec3(reader, path, "tangent", typeOf("tangent"));
+    if (wantTangent && !typeOf("tangent").empty()) out.volume.tangent = readVec3(reader, path, "tangent", typeOf("tangent"));
     return out;
 }
 
@@ -318,9 +319,10 @@ nlohmann::json render(const RenderJob& job, lic::Progress& progress)
     try {
         for (int f = 1; f <= frames; ++f) {
             auto t0 = Clock::now();
-            LoadedVolume lv = loadVolume(inputs[std::size_t(f - 1)], /*wantHalo=*/true, settings.colormap.has_value());
+            LoadedVolume lv = loadVolume(inputs[std::size_t(f - 1)], /*wantHalo=*/true, settings.colormap.has_value(),
+                                         settings.lighting.enabled);
             if (f == 1) firstGrids = lv.gridTypes;
-            lv.volume.flow = flow;
+            if (settings.lighting.enabled) lv.volume.flow = flow;
             lic::HaloRaycaster caster(lv.volume, settings, progress);
             tLoad += seconds(t0);
             usedHalo = caster.hasHalo();

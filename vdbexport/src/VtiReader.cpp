@@ -515,7 +515,7 @@ DenseImage parseLegacyVtk(std::string_view s, const std::string& source)
             img.dims = d;
             const double n = c.number(key);
             if (n != double(img.voxelCount()))
-                inputError(source, key + " " + std::to_string(std::int64_t(n)) + " does not match DIMENSIONS ("
+                inputError(source, key + " " + std::to_string(n) + " does not match DIMENSIONS ("
                                        + std::to_string(img.voxelCount()) + " expected; mismatched shape)");
         } else if (key == "VECTORS" || key == "SCALARS" || key == "NORMALS") {
             if (!haveData) inputError(source, key + " before POINT_DATA or CELL_DATA");
