@@ -1,4 +1,5 @@
 #include "vdbexport/ImageIO.h"
+#include "vdbexport/VdbIO.h"
 
 #include <lic/Error.h>
 
@@ -45,50 +46,18 @@ std::string formatFor(const std::string& path)
     return "";
 }
 
-/// Check the output directory (as vdbexport::writeVdbAtomic does) and return a temporary path.
+/// Check the image path (known extension, writable directory) and return the temporary name to
+/// write first; see detail::prepareAtomicWrite.
 std::string prepare(const std::string& path)
 {
     if (path.empty()) throw lic::InputError("cannot write an image with an empty path; expected a file name");
     if (formatFor(path).empty())
         throw lic::InputError("cannot write " + quote(path) + ": unknown image extension " +
-                              quote(fs::path(path).extension().string()) +
-                              "; expected .png, .exr, .jpg, .tif or .gif");
-    const fs::path p(path);
-    fs::path dir = p.parent_path();
-    if (dir.empty()) dir = ".";
-    std::error_code ec;
-    if (!fs::exists(dir, ec))
-        throw lic::InputError("cannot write " + quote(path) + ": directory " + quote(dir.string()) +
-                              " does not exist; create it first or choose another output path");
-    if (!fs::is_directory(dir, ec))
-        throw lic::InputError("cannot write " + quote(path) + ": " + quote(dir.string()) +
-                              " is not a directory; expected an existing directory");
-    if (::access(dir.c_str(), W_OK) != 0)
-        throw lic::InputError("cannot write " + quote(path) + ": directory " + quote(dir.string()) +
-                              " is not writable (" + std::strerror(errno) + ")");
-    if (fs::is_directory(p, ec))
-        throw lic::InputError("cannot write " + quote(path) + ": it is a directory; expected a file path");
-    return path + ".tmp-" + std::to_string(::getpid());
+                              quote(fs::path(path).extension().string()) + "; expected .png, .exr, .jpg, .tif or .gif");
+    return detail::prepareAtomicWrite(path);
 }
 
-void commit(const std::string& tmp, const std::string& path)
-{
-    std::error_code ec;
-    const int fd = ::open(tmp.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0 || ::fsync(fd) != 0) {
-        const std::string reason = std::strerror(errno);
-        if (fd >= 0) ::close(fd);
-        fs::remove(tmp, ec);
-        throw lic::Error("cannot write " + quote(path) + ": flushing " + quote(tmp) + " failed (" + reason + ")");
-    }
-    ::close(fd);
-    fs::rename(tmp, path, ec);
-    if (ec) {
-        const std::string reason = ec.message();
-        fs::remove(tmp, ec);
-        throw lic::Error("cannot write " + quote(path) + ": renaming " + quote(tmp) + " failed (" + reason + ")");
-    }
-}
+void commit(const std::string& tmp, const std::string& path) { detail::commitAtomicWrite(tmp, path); }
 
 /// Display-encoded float RGB → 8-bit, rounding to nearest.
 std::vector<unsigned char> toBytes(const std::vector<float>& rgb)

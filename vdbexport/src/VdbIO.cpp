@@ -229,6 +229,17 @@ openvdb::FloatGrid::Ptr toFloat(const openvdb::GridBase::Ptr& grid)
     return nullptr;
 }
 
+/// The grid types whose tiles writeVdbAtomic voxelizes (point grids are left alone).
+using VoxelizableGridTypes = openvdb::NumericGridTypes::Append<openvdb::Vec3GridTypes>::Append<
+    openvdb::BoolGrid, openvdb::MaskGrid>;
+
+} // namespace
+
+// ------------------------------------------------------------------------------------------
+// detail
+
+namespace detail {
+
 /// Check that `path` names a file we may create: its directory exists and is writable, and
 /// `path` itself is not a directory. Returns the temporary name to write first.
 std::string prepareAtomicWrite(const std::string& path)
@@ -275,16 +286,6 @@ void commitAtomicWrite(const std::string& tmp, const std::string& path)
     }
 }
 
-/// The grid types whose tiles writeVdbAtomic voxelizes (point grids are left alone).
-using VoxelizableGridTypes = openvdb::NumericGridTypes::Append<openvdb::Vec3GridTypes>::Append<
-    openvdb::BoolGrid, openvdb::MaskGrid>;
-
-} // namespace
-
-// ------------------------------------------------------------------------------------------
-// detail
-
-namespace detail {
 
 VdbReader::VdbReader(std::string path) : mPath(std::move(path))
 {
@@ -555,7 +556,7 @@ std::map<std::string, openvdb::FloatGrid::Ptr> readScalarGrids(const std::string
 void writeVdbAtomic(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)
 {
     openvdb::initialize();
-    const std::string tmp = prepareAtomicWrite(path);
+    const std::string tmp = detail::prepareAtomicWrite(path);
     std::error_code ec;
     try {
         for (std::size_t i = 0; i < grids.size(); ++i) {
@@ -596,12 +597,12 @@ void writeVdbAtomic(const std::string& path, openvdb::GridPtrVec grids, const op
         fs::remove(tmp, ec);
         throw lic::Error("cannot write " + quote(path) + " (via " + quote(tmp) + "): " + e.what());
     }
-    commitAtomicWrite(tmp, path);
+    detail::commitAtomicWrite(tmp, path);
 }
 
 void writeTextAtomic(const std::string& path, const std::string& text)
 {
-    const std::string tmp = prepareAtomicWrite(path);
+    const std::string tmp = detail::prepareAtomicWrite(path);
     std::error_code ec;
     {
         std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
@@ -615,7 +616,7 @@ void writeTextAtomic(const std::string& path, const std::string& text)
                              + reason + ")");
         }
     }
-    commitAtomicWrite(tmp, path);
+    detail::commitAtomicWrite(tmp, path);
 }
 
 } // namespace vdbexport

@@ -53,6 +53,15 @@ void writeTextAtomic(const std::string& path, const std::string& text);
 
 namespace detail {
 
+/// Check that `path` names a file we may create: its directory exists and is writable, and
+/// `path` itself is not a directory. Returns the temporary name to write first (then
+/// commitAtomicWrite). Shared by the VDB, text and image writers.
+/// @throw lic::InputError naming the path and the problem.
+std::string prepareAtomicWrite(const std::string& path);
+
+/// Flush `tmp` to disk, then rename it over `path`. Removes `tmp` and throws lic::Error on failure.
+void commitAtomicWrite(const std::string& tmp, const std::string& path);
+
 /// @brief A .vdb file opened for reading, with every failure turned into a lic::InputError
 ///        that names the file. Shared by readVelocityGrid, readScalarGrids and describeVdb.
 ///
