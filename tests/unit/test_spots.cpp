@@ -45,7 +45,9 @@ TEST(Spots, AllDistributionsAreDeterministicInsideTheBoxAndAboutOnePerCell)
         ASSERT_EQ(a, b);
         for (const auto& p : a) ASSERT_TRUE(kBox.isInside(p));
         EXPECT_NEAR(double(a.size()) / lattice, 1.0, 0.12);
-        if (d != lic::SpotDistribution::Regular) EXPECT_NE(place(d, 0.25, 8), a) << "seed must matter";
+        if (d != lic::SpotDistribution::Regular) {
+            EXPECT_NE(place(d, 0.25, 8), a) << "seed must matter";
+        }
     }
     EXPECT_EQ(place(lic::SpotDistribution::Regular).size(), 4096u);
     EXPECT_EQ(place(lic::SpotDistribution::Random).size(), 4096u);
