@@ -3,6 +3,8 @@
 // and the exit status; helpers write .npy / .vti fixtures byte by byte.
 #pragma once
 
+#include "CliRun.h"
+
 #include <gtest/gtest.h>
 
 #include <openvdb/openvdb.h>
@@ -18,49 +20,21 @@
 #include <string>
 #include <vector>
 
-#include <sys/wait.h>
 #include <unistd.h>
 
 namespace inputs_test {
 
 namespace fs = std::filesystem;
 
-struct RunResult
-{
-    int code = -1;
-    std::string out, err, command;
-    std::string describe() const
-    {
-        return "command: " + command + "\nexit: " + std::to_string(code) + "\n--- stdout ---\n" + out
-               + "\n--- stderr ---\n" + err + "\n";
-    }
-};
-
-inline std::string shellQuote(const std::string& s)
-{
-    std::string q = "'";
-    for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-    return q + "'";
-}
-
-inline std::string readText(const fs::path& p)
-{
-    std::ifstream in(p, std::ios::binary);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-}
+using cli_test::lower;
+using cli_test::readText;
+using cli_test::RunResult;
+using cli_test::shellQuote;
 
 inline void writeBytes(const fs::path& p, const std::string& bytes)
 {
     std::ofstream out(p, std::ios::binary);
     out << bytes;
-}
-
-inline std::string lower(std::string s)
-{
-    for (auto& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
-    return s;
 }
 
 template<typename T>
@@ -126,30 +100,9 @@ protected:
     }
     fs::path work(const std::string& name = "") const { return name.empty() ? mRoot / "work" : mRoot / "work" / name; }
 
-    RunResult runCommand(const std::string& command)
-    {
-        const int n = mRuns++;
-        const fs::path outFile = mRoot / "logs" / ("stdout." + std::to_string(n));
-        const fs::path errFile = mRoot / "logs" / ("stderr." + std::to_string(n));
-        RunResult r;
-        r.command = command;
-        const std::string cmd = "cd " + shellQuote(work().string()) + " && " + command + " </dev/null >"
-                                + shellQuote(outFile.string()) + " 2>" + shellQuote(errFile.string());
-        const int status = std::system(cmd.c_str());
-        if (status == -1) r.code = -1;
-        else if (WIFEXITED(status)) r.code = WEXITSTATUS(status);
-        else if (WIFSIGNALED(status)) r.code = 128 + WTERMSIG(status);
-        r.out = readText(outFile);
-        r.err = readText(errFile);
-        return r;
-    }
+    RunResult runCommand(const std::string& command) { return cli_test::runShell(work(), mRoot / "logs", command); }
 
-    RunResult run(const std::vector<std::string>& args)
-    {
-        std::string c = shellQuote(LICVDB_EXE);
-        for (const auto& a : args) c += " " + shellQuote(a);
-        return runCommand(c);
-    }
+    RunResult run(const std::vector<std::string>& args) { return runCommand(cli_test::licvdbCommand(args)); }
 
 public:
     /// Bake arguments with small, fast defaults (--length 4 --step 0.5 --upsample 1); `extra` is appended.
@@ -172,7 +125,6 @@ public:
 
 protected:
     fs::path mRoot;
-    int mRuns = 0;
 };
 
 } // namespace inputs_test

@@ -4,6 +4,7 @@
 // short kernels) so the suite runs in seconds.
 #include <gtest/gtest.h>
 
+#include "CliRun.h"
 #include "vdbexport/Info.h"
 #include "vdbexport/VdbIO.h"
 
@@ -28,7 +29,6 @@
 #include <string>
 #include <vector>
 
-#include <sys/wait.h>
 #include <unistd.h>
 
 namespace fs = std::filesystem;
@@ -38,50 +38,15 @@ namespace {
 
 // ---- running the binary ---------------------------------------------------------------------
 
-struct RunResult
-{
-    int code = -1; ///< exit status; 128 + signal if killed by a signal; -1 if it could not run
-    std::string out;
-    std::string err;
-    std::string command;
-
-    /// For assertion messages.
-    std::string describe() const
-    {
-        return "command: " + command + "\nexit: " + std::to_string(code) + "\n--- stdout ---\n" + out +
-               "\n--- stderr ---\n" + err + "\n";
-    }
-};
-
-std::string shellQuote(const std::string& s)
-{
-    std::string q = "'";
-    for (char c : s) {
-        if (c == '\'') q += "'\\''";
-        else q += c;
-    }
-    return q + "'";
-}
-
-std::string readText(const fs::path& p)
-{
-    std::ifstream in(p, std::ios::binary);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-}
+using cli_test::lower;
+using cli_test::readText;
+using cli_test::RunResult;
 
 void writeText(const fs::path& p, const std::string& text)
 {
     std::ofstream out(p, std::ios::binary);
     out << text;
     ASSERT_TRUE(out.good()) << "cannot write " << p;
-}
-
-std::string lower(std::string s)
-{
-    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-    return s;
 }
 
 /// Every active voxel value of a float grid must be finite and in [0, 1].
@@ -176,34 +141,8 @@ protected:
 
     fs::path work(const std::string& name = "") const { return name.empty() ? mRoot / "work" : mRoot / "work" / name; }
 
-    /// Run licvdb with `args`; stdin is /dev/null, stdout and stderr are captured.
-    RunResult run(const std::vector<std::string>& args)
-    {
-        const int n = mRuns++;
-        const fs::path outFile = mRoot / "logs" / ("stdout." + std::to_string(n));
-        const fs::path errFile = mRoot / "logs" / ("stderr." + std::to_string(n));
-        RunResult r;
-        r.command = shellQuote(LICVDB_EXE);
-        for (const auto& a : args) {
-            r.command += ' ';
-            r.command += shellQuote(a);
-        }
-        std::string cmd = "cd ";
-        cmd += shellQuote(work().string());
-        cmd += " && ";
-        cmd += r.command;
-        cmd += " </dev/null >";
-        cmd += shellQuote(outFile.string());
-        cmd += " 2>";
-        cmd += shellQuote(errFile.string());
-        const int status = std::system(cmd.c_str());
-        if (status == -1) r.code = -1;
-        else if (WIFEXITED(status)) r.code = WEXITSTATUS(status);
-        else if (WIFSIGNALED(status)) r.code = 128 + WTERMSIG(status);
-        r.out = readText(outFile);
-        r.err = readText(errFile);
-        return r;
-    }
+    /// Run licvdb with `args` in the work directory; stdin is /dev/null, stdout and stderr are captured.
+    RunResult run(const std::vector<std::string>& args) { return cli_test::runLicvdb(work(), mRoot / "logs", args); }
 
     /// `licvdb field PRESET --res RES --out NAME` into the work directory; returns the path.
     fs::path makeField(const std::string& name, const std::string& preset = "abc", const std::string& res = "12,12,12")
@@ -234,7 +173,6 @@ protected:
     }
 
     fs::path mRoot;
-    int mRuns = 0;
 };
 
 // ---- 1. field → bake → info ------------------------------------------------------------------
@@ -546,6 +484,56 @@ TEST_F(CliTest, SpotFlagsMapOntoTheRecipeAndWriteHaloAndSeries)
         EXPECT_FALSE(b.err.empty());
         EXPECT_FALSE(fs::exists(work("bad.vdb"))) << b.describe();
     }
+}
+
+TEST_F(CliTest, HalfStorageHalvesTheFileAndReadsBackAsFloat)
+{
+    // The same spot bake written as 32-bit and as 16-bit floats: the half file is much smaller,
+    // has the same grids and topology, reads back as float/vec3s grids (plain OpenVDB, and
+    // `licvdb info` and `render`), and agrees with the full-precision values to half precision.
+    const fs::path field = makeField("jet.vdb", "tabbed-jet", "16,16,24");
+    const std::vector<std::string> args{"--input", "spots", "--spacing", "5", "--write-tangent", "--color",
+                                        "temperature", "--quiet"};
+    const fs::path full = work("full.vdb"), half = work("half.vdb");
+    ASSERT_EQ(bake(field, full, args).code, 0);
+    auto halfArgs = args;
+    halfArgs.push_back("--half");
+    const RunResult r = bake(field, half, halfArgs);
+    ASSERT_EQ(r.code, 0) << r.describe();
+    const auto fullSize = fs::file_size(full), halfSize = fs::file_size(half);
+    EXPECT_LT(double(halfSize), 0.7 * double(fullSize)) << fullSize << " vs " << halfSize << " bytes";
+
+    const auto a = readAll(full), b = readAll(half);
+    ASSERT_EQ(a.size(), b.size());
+    for (const char* name : {"density", "halo", "scalar"}) {
+        auto fa = openvdb::gridPtrCast<openvdb::FloatGrid>(a.at(name));
+        auto fb = openvdb::gridPtrCast<openvdb::FloatGrid>(b.at(name));
+        ASSERT_TRUE(fa && fb) << name;
+        EXPECT_TRUE(fa->tree().hasSameTopology(fb->tree())) << name;
+        double worst = 0;
+        for (auto it = fa->cbeginValueOn(); it; ++it)
+            worst = std::max(worst, std::abs(double(*it) - double(fb->tree().getValue(it.getCoord()))));
+        EXPECT_LE(worst, 1e-3) << name; // values in [0, 1]: half spacing is <= 2^-11
+        EXPECT_GT(fa->activeVoxelCount(), 0u);
+    }
+    for (const char* name : {"tangent", "color"}) {
+        auto va = openvdb::gridPtrCast<openvdb::Vec3SGrid>(a.at(name));
+        auto vb = openvdb::gridPtrCast<openvdb::Vec3SGrid>(b.at(name));
+        ASSERT_TRUE(va && vb) << name;
+        double worst = 0;
+        for (auto it = va->cbeginValueOn(); it; ++it)
+            worst = std::max(worst, double((*it - vb->tree().getValue(it.getCoord())).length()));
+        EXPECT_LE(worst, 2e-3) << name;
+    }
+    const json recipe = json::parse(readText(work("half.json")))["recipe"];
+    EXPECT_EQ(recipe["output"]["half"], true);
+    const RunResult info = run({"info", half.string()});
+    EXPECT_EQ(info.code, 0) << info.describe();
+    EXPECT_NE(info.out.find("density"), std::string::npos) << info.describe();
+    const RunResult render = run({"render", half.string(), "--out", work("half.png").string(), "--size", "32,32",
+                                  "--quiet"});
+    EXPECT_EQ(render.code, 0) << render.describe();
+    EXPECT_TRUE(fs::exists(work("half.png")));
 }
 
 TEST_F(CliTest, CyclicSequence)
@@ -927,20 +915,15 @@ TEST_F(CliTest, FastAndNaiveAgree)
 
 TEST_F(CliTest, VdbPrintListsDensity)
 {
+    // scripts/install-deps installs libopenvdb-tools; a missing tool fails rather than skips.
     const char* vdbPrint = "/usr/bin/vdb_print";
-    if (!fs::exists(vdbPrint)) {
-        GTEST_SKIP() << vdbPrint << " is not installed (scripts/install-deps installs it); "
-                     << "cannot check that OpenVDB's own tool reads licvdb output";
-    }
+    ASSERT_TRUE(fs::exists(vdbPrint)) << vdbPrint << " is not installed (scripts/install-deps installs it)";
     const fs::path field = makeField("abc.vdb");
     const fs::path out = work("lic.vdb");
     ASSERT_EQ(bake(field, out, {"--quiet"}).code, 0);
-    const fs::path log = mRoot / "logs" / "vdb_print.txt";
-    const std::string cmd = std::string(vdbPrint) + " " + shellQuote(out.string()) + " >" + shellQuote(log.string()) + " 2>&1";
-    const int status = std::system(cmd.c_str());
-    const std::string text = readText(log);
-    ASSERT_TRUE(WIFEXITED(status)) << text;
-    EXPECT_EQ(WEXITSTATUS(status), 0) << text;
+    const RunResult r = cli_test::runShell(work(), mRoot / "logs", std::string(vdbPrint) + " " + cli_test::shellQuote(out.string()));
+    const std::string text = r.out + r.err;
+    EXPECT_EQ(r.code, 0) << r.describe();
     EXPECT_NE(text.find("density"), std::string::npos) << text;
 }
 

@@ -3,6 +3,7 @@
 // exit codes, messages, the --json summary and the images written (read back with OIIO).
 #include <gtest/gtest.h>
 
+#include "CliRun.h"
 #include "vdbexport/ImageIO.h"
 
 #include <nlohmann/json.hpp>
@@ -17,7 +18,6 @@
 #include <string>
 #include <vector>
 
-#include <sys/wait.h>
 #include <unistd.h>
 
 namespace fs = std::filesystem;
@@ -25,57 +25,14 @@ using nlohmann::json;
 
 namespace {
 
-struct RunResult
-{
-    int code = -1;
-    std::string out, err, command;
-    std::string describe() const
-    {
-        return "command: " + command + "\nexit: " + std::to_string(code) + "\n--- stdout ---\n" + out +
-               "\n--- stderr ---\n" + err + "\n";
-    }
-};
-
-std::string shellQuote(const std::string& s)
-{
-    std::string q = "'";
-    for (char c : s) {
-        if (c == '\'') q += "'\\''";
-        else q += c;
-    }
-    return q + "'";
-}
-
-std::string readText(const fs::path& p)
-{
-    std::ifstream in(p, std::ios::binary);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-}
-
-std::string lower(std::string s)
-{
-    for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
-    return s;
-}
+using cli_test::lower;
+using cli_test::readText;
+using cli_test::RunResult;
 
 /// Run licvdb with `args` in `dir`, capturing stdout/stderr into `logs`.
 RunResult runIn(const fs::path& dir, const fs::path& logs, const std::vector<std::string>& args)
 {
-    static std::atomic<int> n{0};
-    const int k = n++;
-    const fs::path outFile = logs / ("stdout." + std::to_string(k)), errFile = logs / ("stderr." + std::to_string(k));
-    RunResult r;
-    r.command = shellQuote(LICVDB_EXE);
-    for (const auto& a : args) r.command += " " + shellQuote(a);
-    const std::string cmd = "cd " + shellQuote(dir.string()) + " && " + r.command + " </dev/null >" +
-                            shellQuote(outFile.string()) + " 2>" + shellQuote(errFile.string());
-    const int status = std::system(cmd.c_str());
-    if (status != -1 && WIFEXITED(status)) r.code = WEXITSTATUS(status);
-    r.out = readText(outFile);
-    r.err = readText(errFile);
-    return r;
+    return cli_test::runLicvdb(dir, logs, args);
 }
 
 class RenderCli : public ::testing::Test

@@ -104,6 +104,7 @@ TEST(Recipe, DefaultsAreValidAndResolvedJsonHasEveryKey)
     EXPECT_TRUE(j["input"]["surface"].is_null());
     EXPECT_EQ(j["output"]["upsample"], 2);
     EXPECT_EQ(j["output"]["write_tangent"], false);
+    EXPECT_EQ(j["output"]["half"], false);
     EXPECT_EQ(j["output"]["contrast"], "stretch");
     EXPECT_EQ(j["input"]["halo_scale"], 2.0);
     EXPECT_EQ(j["input"]["seed"], 1);
@@ -589,4 +590,26 @@ TEST(RecipeField, HugeNumberIsInvalidJson)
 {
     const std::string msg = inputError([] { vdbexport::parseRecipe("{\"lic\": {\"length\": 1e999999}}", "big.json"); });
     EXPECT_NE(msg.find("big.json: invalid JSON"), std::string::npos) << msg;
+}
+
+// The shipped example recipes (scripts/demo bakes one; docs point at both) must stay valid as
+// the schema grows, and must say what their comments promise.
+TEST(RecipeExamples, ShippedRecipesParse)
+{
+    const std::filesystem::path dir = std::filesystem::path(LICVDB_SOURCE_DIR) / "examples" / "recipes";
+    int parsed = 0;
+    for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+        if (entry.path().extension() != ".json") continue;
+        SCOPED_TRACE(entry.path().string());
+        const Recipe r = vdbexport::loadRecipeFile(entry.path().string());
+        EXPECT_FALSE(r.field.path.empty());
+        EXPECT_FALSE(r.output.path.empty());
+        ++parsed;
+    }
+    EXPECT_GE(parsed, 2);
+    const Recipe halos = vdbexport::loadRecipeFile((dir / "tabbed-jet-halos.json").string());
+    EXPECT_EQ(halos.input.type, "spots");
+    EXPECT_TRUE(halos.roi.has_value());
+    EXPECT_TRUE(halos.width.has_value());
+    EXPECT_TRUE(halos.output.half);
 }

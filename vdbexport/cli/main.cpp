@@ -179,9 +179,10 @@ int main(int argc, char** argv)
     auto* oMask = bake->add_option("--mask", cli.field.mask, "none|zero: zero deactivates zero-velocity voxels [none]");
     auto* oNanPolicy = bake->add_option("--nan-policy", cli.field.nanPolicy, "refuse|zero: NaN/Inf in the field is an error, or set to 0 [refuse]");
     auto* oFrames = bake->add_option("--frames", cli.animation.frames, "Frames of a cyclic animation [1]");
-    bool writeInput = false, writeTangent = false;
+    bool writeInput = false, writeTangent = false, halfFloat = false;
     auto* oWriteInput = bake->add_flag("--write-input", writeInput, "Also write the input texture as grid `input`");
     auto* oWriteTangent = bake->add_flag("--write-tangent", writeTangent, "Also write the unit flow direction as vec3s grid `tangent`");
+    auto* oHalf = bake->add_flag("--half", halfFloat, "Store grids as 16-bit half floats on disk (about half the file size)");
     // Spots, halos, width, region and surface of interest.
     std::string spotRadii, roiScalar, roiRange, roiMode, widthScalar, widthRange, surfaceScalar;
     double surfaceThreshold = 0.0;
@@ -401,6 +402,7 @@ int main(int argc, char** argv)
             }
             if (oWriteInput->count()) r.output.writeInput = true;
             if (oWriteTangent->count()) r.output.writeTangent = true;
+            if (oHalf->count()) r.output.half = true;
             if (oDistribution->count()) r.input.distribution = cli.input.distribution;
             if (oSpacing->count()) r.input.spacing = cli.input.spacing;
             if (oJitter->count()) r.input.jitter = cli.input.jitter;

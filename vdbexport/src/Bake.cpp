@@ -541,6 +541,8 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
                 }
             }
             fileGrids.insert(fileGrids.end(), grids.begin(), grids.end());
+            if (recipe.output.half)
+                for (const auto& g : fileGrids) g->setSaveFloatAsHalf(true);
             if (f == 1) firstGrids = fileGrids;
             writeVdbAtomic(paths[std::size_t(f - 1)], fileGrids);
         }

@@ -110,7 +110,8 @@ template <> struct Schema<OutputSpec>
     {
         return std::make_tuple(field("path", &OutputSpec::path), field("upsample", &OutputSpec::upsample),
             field("write_input", &OutputSpec::writeInput), field("write_series", &OutputSpec::writeSeries),
-            field("contrast", &OutputSpec::contrast), field("write_tangent", &OutputSpec::writeTangent));
+            field("contrast", &OutputSpec::contrast), field("write_tangent", &OutputSpec::writeTangent),
+            field("half", &OutputSpec::half));
     }
 };
 template <> struct Schema<SurfaceSpec>

@@ -55,6 +55,9 @@ struct OutputSpec
     bool writeSeries = false;    ///< `write_series`: also write `density_w<k>` / `halo_w<k>`
     std::string contrast = "stretch"; ///< `contrast`: "stretch" | "none"
     bool writeTangent = false;   ///< `write_tangent`: also write the `tangent` vec3s grid
+    /// `half`: store float and vec3s grids as 16-bit halves on disk (about half the file;
+    /// readers get float grids back, to ~5e-4 relative)
+    bool half = false;
 
     bool operator==(const OutputSpec&) const = default;
 };
