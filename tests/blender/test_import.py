@@ -6,6 +6,7 @@ import bpy
 import pytest
 from mathutils import Vector
 
+from conftest import run_licvdb
 from licvdb import manifest as mf
 from licvdb import ops_import
 
@@ -167,3 +168,28 @@ def test_placement_matches_field_bbox(bakes):
         assert rendered_hi[a] == pytest.approx(fhi[a], abs=half + 1e-6), (a, rendered_hi, fhi)
     print(f"placement: rendered {rendered_lo} .. {rendered_hi}; manifest {mlo} .. {mhi}; "
           f"field {flo} .. {fhi}; half voxel {half:.4f}, shift {shift:.4f}")
+
+
+def test_import_half_float_spot_bake(bakes, tmp_path):
+    """A spot bake stored with --half (16-bit on disk) imports like a full-precision one: the same
+    grids, read by Blender as float grids, at the same place, with the halo look."""
+    paths = {}
+    for name, extra in (("full", []), ("half", ["--half"])):
+        out = tmp_path / f"{name}.vdb"
+        run_licvdb("bake", "--field", bakes["field"], "--out", out, "--input", "spots", "--spacing", "8",
+                   "--length", "8", "--write-tangent", "--quiet", *extra)
+        paths[name] = out
+    assert os.path.getsize(paths["half"]) < 0.8 * os.path.getsize(paths["full"])
+    bounds, types = {}, {}
+    for name, path in paths.items():
+        obj = import_one(path)
+        assert obj.data.grids.load(), f"Blender cannot load {path}"
+        types[name] = {g.name: g.data_type for g in obj.data.grids}
+        bounds[name] = world_bounds(obj)
+        assert obj.licvdb.look == "HALOS"
+    assert types["half"] == types["full"]
+    assert types["half"]["density"] == "FLOAT" and types["half"]["halo"] == "FLOAT"
+    assert types["half"]["tangent"] == "VECTOR_FLOAT"
+    for a in range(3):
+        assert bounds["half"][0][a] == pytest.approx(bounds["full"][0][a], abs=1e-9)
+        assert bounds["half"][1][a] == pytest.approx(bounds["full"][1][a], abs=1e-9)

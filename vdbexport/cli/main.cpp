@@ -6,6 +6,7 @@
 
 #include "vdbexport/Bake.h"
 #include "vdbexport/Info.h"
+#include "vdbexport/Numbers.h"
 #include "vdbexport/Recipe.h"
 #include "vdbexport/Render.h"
 #include "vdbexport/TerminalProgress.h"
@@ -87,26 +88,6 @@ openvdb::Coord parseRes(const std::string& s)
     if (v.size() == 1) return openvdb::Coord(v[0]);
     if (v.size() != 3) throw lic::InputError("--res \"" + s + "\" needs 1 or 3 numbers (X,Y,Z)");
     return openvdb::Coord(v[0], v[1], v[2]);
-}
-
-/// "1,2,3" → exactly `n` numbers, for --origin, --shape and --crop.
-std::vector<double> parseNumbers(const std::string& flag, const std::string& s, std::size_t n, const char* expected)
-{
-    std::vector<double> v;
-    std::stringstream in(s);
-    std::string part;
-    while (std::getline(in, part, ',')) {
-        try {
-            std::size_t used = 0;
-            v.push_back(std::stod(part, &used));
-            if (used != part.size()) throw std::invalid_argument(part);
-        } catch (const std::exception&) {
-            throw lic::InputError(flag + " \"" + s + "\": \"" + part + "\" is not a number; expected " + expected);
-        }
-    }
-    if (v.size() != n)
-        throw lic::InputError(flag + " \"" + s + "\" has " + std::to_string(v.size()) + " numbers; expected " + expected);
-    return v;
 }
 
 std::string presetList()
@@ -367,15 +348,15 @@ int main(int argc, char** argv)
             if (oMask->count()) r.field.mask = cli.field.mask;
             if (oNanPolicy->count()) r.field.nanPolicy = cli.field.nanPolicy;
             if (!fieldOrigin.empty()) {
-                const auto v = parseNumbers("--origin", fieldOrigin, 3, "X,Y,Z");
+                const auto v = vdbexport::parseNumberList("--origin", fieldOrigin, "X,Y,Z", 3);
                 r.field.origin = std::array<double, 3>{v[0], v[1], v[2]};
             }
             if (!fieldShape.empty()) {
-                const auto v = parseNumbers("--shape", fieldShape, 3, "X,Y,Z (voxels)");
+                const auto v = vdbexport::parseNumberList("--shape", fieldShape, "X,Y,Z (voxels)", 3);
                 r.field.shape = std::array<double, 3>{v[0], v[1], v[2]};
             }
             if (!fieldCrop.empty()) {
-                const auto v = parseNumbers("--crop", fieldCrop, 6, "X0,Y0,Z0,X1,Y1,Z1 (world units)");
+                const auto v = vdbexport::parseNumberList("--crop", fieldCrop, "X0,Y0,Z0,X1,Y1,Z1 (world units)", 6);
                 r.field.crop = std::array<std::array<double, 3>, 2>{{{v[0], v[1], v[2]}, {v[3], v[4], v[5]}}};
             }
             if (oInput->count()) r.input.type = cli.input.type;
@@ -408,7 +389,7 @@ int main(int argc, char** argv)
             if (oJitter->count()) r.input.jitter = cli.input.jitter;
             if (!spotRadii.empty()) {
                 const auto n = std::size_t(std::count(spotRadii.begin(), spotRadii.end(), ',')) + 1;
-                r.input.radii = parseNumbers("--radii", spotRadii, n, "R1,R2,... (output voxels)");
+                r.input.radii = vdbexport::parseNumberList("--radii", spotRadii, "R1,R2,... (output voxels)", n);
             }
             if (oHaloScale->count()) r.input.haloScale = cli.input.haloScale;
             if (!surfaceScalar.empty()) {
@@ -427,7 +408,7 @@ int main(int argc, char** argv)
             }
             if (!roiRange.empty()) {
                 if (!r.roi) throw lic::InputError("--roi-range needs --roi SCALAR");
-                const auto v = parseNumbers("--roi-range", roiRange, 2, "LO,HI");
+                const auto v = vdbexport::parseNumberList("--roi-range", roiRange, "LO,HI", 2);
                 r.roi->range = {v[0], v[1]};
             }
             if (oRoiMode->count()) {
@@ -440,7 +421,7 @@ int main(int argc, char** argv)
             }
             if (!widthRange.empty()) {
                 if (!r.width) throw lic::InputError("--width-range needs --width SCALAR");
-                const auto v = parseNumbers("--width-range", widthRange, 2, "LO,HI");
+                const auto v = vdbexport::parseNumberList("--width-range", widthRange, "LO,HI", 2);
                 r.width->range = std::array<double, 2>{v[0], v[1]};
             }
             if (widthInvert) {

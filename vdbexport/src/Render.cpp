@@ -1,5 +1,6 @@
 #include "vdbexport/Render.h"
 
+#include "vdbexport/Numbers.h"
 #include "vdbexport/VdbIO.h"
 
 #include <lic/Colormap.h>
@@ -87,30 +88,12 @@ std::string manifestDir(const std::string& manifest)
     return d.empty() ? "." : d.string();
 }
 
-std::vector<double> parseList(const std::string& flag, const std::string& s, const char* expected)
-{
-    std::vector<double> v;
-    std::stringstream in(s);
-    std::string part;
-    while (std::getline(in, part, ',')) {
-        try {
-            std::size_t used = 0;
-            v.push_back(std::stod(part, &used));
-            if (used != part.size() || !std::isfinite(v.back())) throw std::invalid_argument(part);
-        } catch (const std::exception&) {
-            throw lic::InputError(flag + " \"" + s + "\" is not valid; expected " + expected);
-        }
-    }
-    if (v.empty()) throw lic::InputError(flag + " \"" + s + "\" is empty; expected " + expected);
-    return v;
-}
-
 } // namespace
 
 void applyRenderFlags(RenderJob& job, const RenderFlagStrings& f)
 {
     if (!f.size.empty()) {
-        const auto v = parseList("--size", f.size, "W,H in pixels (e.g. 1024,768) or one number for a square");
+        const auto v = parseNumberList("--size", f.size, "W,H in pixels (e.g. 1024,768) or one number for a square");
         if (v.size() > 2) throw lic::InputError("--size \"" + f.size + "\" has " + std::to_string(v.size()) +
                                                 " numbers; expected W,H in pixels");
         const double w = v[0], h = v.size() == 2 ? v[1] : v[0];
@@ -131,7 +114,7 @@ void applyRenderFlags(RenderJob& job, const RenderFlagStrings& f)
         } else if (f.light == "off" || f.light == "none") {
             job.settings.lighting.enabled = false;
         } else {
-            const auto v = parseList("--light", f.light, "headlight, off, or a direction X,Y,Z towards the light");
+            const auto v = parseNumberList("--light", f.light, "headlight, off, or a direction X,Y,Z towards the light");
             if (v.size() != 3 || openvdb::Vec3d(v[0], v[1], v[2]).length() == 0.0)
                 throw lic::InputError("--light \"" + f.light +
                                       "\" is not valid; expected headlight, off, or a non-zero direction X,Y,Z towards the light");
@@ -140,7 +123,7 @@ void applyRenderFlags(RenderJob& job, const RenderFlagStrings& f)
         }
     }
     if (!f.densityRange.empty()) {
-        const auto v = parseList("--density-range", f.densityRange, "LO,HI with 0 <= LO < HI");
+        const auto v = parseNumberList("--density-range", f.densityRange, "LO,HI with 0 <= LO < HI");
         if (v.size() != 2 || !(v[0] >= 0.0 && v[0] < v[1]))
             throw lic::InputError("--density-range \"" + f.densityRange + "\" is not valid; expected LO,HI with 0 <= LO < HI");
         job.settings.densityLow = v[0];
