@@ -3,7 +3,7 @@
 ``build_lic_material(mat, grids, look)`` clears ``mat``'s node tree except its output, adds the
 nodes for ``look`` and links them by socket name. Only the output's *Volume* socket is
 connected: a Surface link on a volume object makes Cycles render its bounding box as an opaque
-block (see DESIGN.md, Blender facts).
+block (see docs/blender.md, "The look").
 
 The look (Cycles and EEVEE):
 

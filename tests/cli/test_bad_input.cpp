@@ -246,6 +246,21 @@ const std::vector<BadCase>& cases()
         {"--origin with two numbers",
          [](const fs::path& w) { return InputsTest::bakeArgs(goodNpy(w), w / "out.vdb", {"--origin", "1,2"}); },
          {"--origin", "X,Y,Z"}},
+        {"recipe ROI without a range",
+         [](const fs::path& w) {
+             writeBytes(w / "roi.json", R"({"input": {"type": "spots"}, "roi": {"scalar": "speed"}})");
+             return InputsTest::bakeArgs(goodNpy(w), w / "out.vdb", {"--recipe", (w / "roi.json").string()});
+         },
+         {"roi.range", "required"}},
+        {"--out is the input field",
+         [](const fs::path& w) { return InputsTest::bakeArgs(goodVdb(w), goodVdb(w)); },
+         {"overwrite", "input field", "--out"}},
+        {"the manifest would replace the recipe",
+         [](const fs::path& w) {
+             writeBytes(w / "r.json", R"({"lic": {"length": 4}})");
+             return InputsTest::bakeArgs(goodNpy(w), w / "r.vdb", {"--recipe", (w / "r.json").string()});
+         },
+         {"overwrite", "recipe", "r.json"}},
     };
     return all;
 }
@@ -282,6 +297,26 @@ INSTANTIATE_TEST_SUITE_P(Cases, BadInputTest, ::testing::Range<std::size_t>(0, c
                              for (char ch : cases()[p.param].name) n += std::isalnum(static_cast<unsigned char>(ch)) ? ch : '_';
                              return std::to_string(p.param) + "_" + n;
                          });
+
+// A bake never replaces its own inputs: the field and the recipe keep their bytes.
+TEST_F(InputsTest, BakeDoesNotOverwriteItsInputs)
+{
+    const fs::path w = work();
+    const fs::path field = goodVdb(w);
+    writeBytes(w / "r.json", R"({"lic": {"length": 4}})");
+    const std::string fieldBytes = readText(field), recipeBytes = readText(w / "r.json");
+    for (const auto& args : {bakeArgs(field, field), bakeArgs(field, w / "r.vdb", {"--recipe", (w / "r.json").string()}),
+                             bakeArgs(field, w / "./r.vdb", {"--recipe", (w / "r.json").string(), "--frames", "2"})}) {
+        const RunResult r = run(args);
+        EXPECT_EQ(r.code, 2) << r.describe();
+        EXPECT_EQ(readText(field), fieldBytes);
+        EXPECT_EQ(readText(w / "r.json"), recipeBytes);
+    }
+    // A different output name is fine.
+    const RunResult ok = run(bakeArgs(field, w / "lic.vdb", {"--recipe", (w / "r.json").string()}));
+    EXPECT_EQ(ok.code, 0) << ok.describe();
+    EXPECT_EQ(readText(w / "r.json"), recipeBytes);
+}
 
 TEST(BadInputSuite, CoversAtLeastTwentyCases) { EXPECT_GE(cases().size(), 20u); }
 

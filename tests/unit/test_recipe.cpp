@@ -20,7 +20,7 @@ using vdbexport::Recipe;
 
 namespace {
 
-// The example recipe of DESIGN.md ("Public contract").
+// The example recipe of the project's design card ("Public contract"; docs/recipe.md).
 const char* kDesignExample = R"({ "field":  {"path": "jet.vdb", "grid": "velocity"},
   "output": {"path": "out.vdb", "upsample": 2, "write_input": false, "write_series": false},
   "input":  {"type": "spots", "distribution": "poisson", "spacing": 6, "jitter": 0.25,
@@ -137,7 +137,7 @@ TEST(Recipe, FullRecipeRoundTrip)
     EXPECT_EQ(back.toJson(), j);
 }
 
-// ---- the DESIGN.md example --------------------------------------------------------------
+// ---- the design card example --------------------------------------------------------------
 
 TEST(Recipe, DesignExampleParses)
 {

@@ -126,7 +126,7 @@ int main(int argc, char** argv)
     std::string recipePath;
     vdbexport::Recipe cli; // values of flags that were given
     CLI::App* bake = app.add_subcommand("bake", "Bake a LIC volume from a vector field");
-    bake->add_option("-f,--field", cli.field.path, "Field .vdb with a Vec3 grid");
+    bake->add_option("-f,--field", cli.field.path, "Field: .vdb (a Vec3 grid, or vel.x/.y/.z), .npy, .vti, .vtk or raw (with --shape)");
     bake->add_option("--grid", cli.field.grid, "Vector grid name (default: velocity, vel, v, the only Vec3 grid)");
     bake->add_option("-o,--out", cli.output.path, "Output .vdb (a sidecar OUT.json manifest is written too)");
     bake->add_option("-r,--recipe", recipePath, "JSON recipe; flags override its values");
@@ -141,7 +141,7 @@ int main(int argc, char** argv)
     auto* oTolerance = bake->add_option("--tolerance", cli.lic.tolerance, "rk45 local error, output voxels [1e-3]");
     auto* oMinHits = bake->add_option("--min-hits", cli.lic.minHits, "fast: deposits a voxel needs before it stops seeding [2]");
     auto* oUpsample = bake->add_option("--upsample", cli.output.upsample, "Output voxels per field voxel [2]");
-    auto* oSeed = bake->add_option("--seed", cli.input.seed, "Noise seed [1]");
+    auto* oSeed = bake->add_option("--seed", cli.input.seed, "Hash seed of the noise and of the spot positions [1]");
     auto* oContrast = bake->add_option("--contrast", cli.output.contrast, "stretch|none [stretch]");
     std::string colorScalar, colormap;
     bake->add_option("--color", colorScalar,
@@ -154,7 +154,7 @@ int main(int argc, char** argv)
     auto* oVoxelSize = bake->add_option("--voxel-size", fieldVoxelSize, "Dense inputs (npy, raw, vti, vtk): world units per voxel [file's, else 1]");
     bake->add_option("--origin", fieldOrigin, "Dense inputs: world position X,Y,Z of voxel (0,0,0)'s centre [file's, else 0]");
     bake->add_option("--shape", fieldShape, "Raw input: X,Y,Z voxels (data is X,Y,Z,3 in C order)");
-    auto* oDtype = bake->add_option("--dtype", cli.field.dtype, "Raw input: float32|float64|<f4|>f4|<f8|>f8 [float32]");
+    auto* oDtype = bake->add_option("--dtype", cli.field.dtype, "Raw input: float32|float64|f4|f8|<f4|>f4|<f8|>f8 [float32]");
     auto* oResample = bake->add_option("--resample", fieldResample, "Resample the field to this voxel size, world units");
     bake->add_option("--crop", fieldCrop, "Crop the field to world box X0,Y0,Z0,X1,Y1,Z1");
     auto* oMask = bake->add_option("--mask", cli.field.mask, "none|zero: zero deactivates zero-velocity voxels [none]");
@@ -189,7 +189,7 @@ int main(int argc, char** argv)
         "  licvdb field tabbed-jet --out jet.vdb\n"
         "  licvdb bake --field jet.vdb --out jet_lic.vdb\n"
         "  licvdb bake --field abc.vdb --out abc_lic.vdb --length 40 --step 0.5 --json\n"
-        "  licvdb bake --recipe examples/recipes/tabbed-jet.json --threads 2\n"
+        "  licvdb bake --recipe examples/recipes/tabbed-jet-halos.json --field jet.vdb --out jet_halos.vdb\n"
         "  licvdb bake --field jet.vdb --out jet_vort.vdb --color vorticity --colormap heated-object\n"
         "  licvdb bake --field cache_data/fluid_data_0010.vdb --out smoke_lic.vdb   # Blender smoke cache\n"
         "  licvdb bake --field flow.npy --voxel-size 0.1 --origin -1,-1,0 --out flow_lic.vdb\n"
@@ -236,7 +236,7 @@ int main(int argc, char** argv)
     render->add_option("--frames", rjob.frames, "Render the sequence IN_0001.vdb … IN_000N.vdb to IMAGE_0001 …");
     render->add_flag("--gif", rjob.gif, "With a sequence, also write an animated IMAGE.gif");
     render->add_option("--fps", rjob.fps, "GIF frame rate [12]");
-    render->add_option("--view-transform", rjob.viewTransform, "standard|filmic (OCIO view for .png/.jpg/.gif) [standard]");
+    render->add_option("--view-transform", rjob.viewTransform, "standard|filmic|raw (OCIO view for .png/.jpg/.tif/.gif) [standard]");
     render->add_option("--ocio-config", rjob.ocioConfig, "OCIO config [$LICVDB_OCIO_CONFIG, else the shipped one]");
     addCommon(render, renderCommon);
     render->footer(
@@ -430,6 +430,7 @@ int main(int argc, char** argv)
             }
             if (writeSeries) r.output.writeSeries = true;
             if (bake->get_option("--threads")->count()) r.threads = bakeCommon.threads;
+            vdbexport::checkNotOverwritten(r, recipePath, "the recipe");
 
             vdbexport::TerminalProgress progress(bakeCommon.quiet, stderr, false, bakeCommon.progressStyle());
             gProgress = &progress;

@@ -49,6 +49,25 @@ std::string manifestPath(const std::string& vdbPath)
     return p.string();
 }
 
+void checkNotOverwritten(const Recipe& recipe, const std::string& path, const std::string& what)
+{
+    if (path.empty()) return;
+    std::error_code ec;
+    const fs::path input = fs::weakly_canonical(path, ec);
+    if (ec) return; // cannot be resolved: reading it will report the problem
+    std::vector<std::string> outputs{manifestPath(recipe.output.path)};
+    for (int f = 1; f <= recipe.animation.frames; ++f)
+        outputs.push_back(framePath(recipe.output.path, f, recipe.animation.frames));
+    for (const auto& out : outputs) {
+        std::error_code e1, e2;
+        const bool same = fs::equivalent(path, out, e1) || fs::weakly_canonical(out, e2) == input;
+        if (same && !e2) {
+            throw lic::InputError("the bake would overwrite " + what + " \"" + path + "\" with \"" + out +
+                                  "\"; choose another --out");
+        }
+    }
+}
+
 namespace {
 
 void requireNotYet(bool used, const std::string& what)
@@ -242,6 +261,7 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
     recipe.validatePaths();
     checkSupported(recipe);
     checkOutputDirectory(recipe.output.path);
+    checkNotOverwritten(recipe, recipe.field.path, "the input field");
     openvdb::initialize();
 
     lic::LicSettings settings;

@@ -438,7 +438,7 @@ void checkScalar(const std::string& path, const std::string& v)
 {
     if (v.empty()) {
         violation(path, "a scalar name (speed, vorticity, streamwise-vorticity, helicity, q-criterion, "
-                        "or a float grid of the field file)", "\"\"");
+                        "lambda2, or a float grid of the field file)", "\"\"");
     }
 }
 
@@ -590,6 +590,11 @@ Recipe parseRecipe(const std::string& text, const std::string& source)
         throw lic::InputError(source + ": invalid JSON: " + reason);
     }
     Recipe r = Recipe::fromJson(j, source);
+    // A region of interest without its range would silently keep [0, 1] of the scalar's own units.
+    if (const auto roi = j.find("roi"); roi != j.end() && roi->is_object() && !roi->contains("range")) {
+        throw lic::InputError(source + ": roi.range is required: [lo, hi], the scalar's range to keep, in its "
+                                       "own units");
+    }
     try {
         r.validate();
     } catch (const lic::InputError& e) {

@@ -18,6 +18,11 @@ std::string framePath(const std::string& vdbPath, int frame, int frames);
 /// The sidecar manifest path of a bake: OUT.vdb → OUT.json (one for a whole loop).
 std::string manifestPath(const std::string& vdbPath);
 
+/// @throw lic::InputError if a file the bake would write (a frame or the manifest) is the file
+/// at `path` under any name (`what` says what it is: "the input field", "the recipe"), so a bake
+/// never replaces its own inputs.
+void checkNotOverwritten(const Recipe& recipe, const std::string& path, const std::string& what);
+
 /// Run the bake described by `recipe` (validated here, paths included): read the field, convolve,
 /// normalise, and write `recipe.output.path` plus its manifest, both atomically (a failed bake
 /// leaves neither). Returns the summary that `licvdb bake --json` prints: output paths, voxel

@@ -1,7 +1,7 @@
 // A bake recipe: every setting of one `licvdb bake`, with defaults, read from JSON,
 // validated, and written back as the fully resolved JSON stored in the output's metadata.
 //
-// The JSON keys are snake_case as in DESIGN.md ("Public contract"); the struct members are
+// The JSON keys are snake_case as in docs/recipe.md; the struct members are
 // camelCase. Lengths (`lic.length`, `lic.step`, `input.spacing`, `input.radii`) are in
 // output voxels, i.e. field voxels times `output.upsample`.
 #pragma once
@@ -140,7 +140,7 @@ struct AnimationSpec
     bool operator==(const AnimationSpec&) const = default;
 };
 
-/// All settings of one bake. Default-constructed = the defaults of DESIGN.md.
+/// All settings of one bake. Default-constructed = the defaults in docs/recipe.md.
 struct Recipe
 {
     FieldSpec field;
