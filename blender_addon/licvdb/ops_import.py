@@ -96,12 +96,12 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
         vs = man.grids[0].voxel_size if man and man.grids else (s.voxel_size,) * 3
         obj.matrix_world = Matrix.Translation(-0.5 * Vector(vs))
         s.half_voxel_shift = True
-    # Set without triggering a rebuild per property.
-    s["look"] = 1 if "halo" in loaded else 0
-    if man and (man.recipe.get("input") or {}).get("type") == "noise":
-        # Dense LIC fills its whole box: less emission and more absorption, so the streaks on and
-        # just under the surface show instead of a glow summed through the volume.
-        s["brightness"], s["line_absorption"] = DENSE_LOOK
+    with props.rebuild_suspended():  # one rebuild below, not one per property
+        s.look = "HALOS" if "halo" in loaded else "LINES"
+        if man and (man.recipe.get("input") or {}).get("type") == "noise":
+            # Dense LIC fills its whole box: less emission and more absorption, so the streaks on
+            # and just under the surface show instead of a glow summed through the volume.
+            s.brightness, s.line_absorption = DENSE_LOOK
     props.apply_look(obj)
 
     for o in context.view_layer.objects:
