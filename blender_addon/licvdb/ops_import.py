@@ -147,8 +147,11 @@ class LICVDB_OT_import_bake(bpy.types.Operator, ImportHelper):
                                          description="Cycles, black world, volume step, no denoising without OIDN")
 
     def invoke(self, context, event):
-        if self.filepath or (self.directory and len(self.files)):
-            return self.execute(context)  # drag and drop
+        # Files given by the caller (drag and drop, a script) import at once; otherwise open the
+        # file browser. Not ``if self.filepath``: started from the menu, Blender restores the last
+        # import's filepath, which is_property_set does not count as set (docs/blender.md).
+        if self.properties.is_property_set("filepath") or (self.directory and len(self.files)):
+            return self.execute(context)
         return ImportHelper.invoke(self, context, event)
 
     def execute(self, context):
