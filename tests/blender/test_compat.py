@@ -94,9 +94,9 @@ def test_panel_reads_the_node_tree_not_use_nodes(bakes):
 
 @pytest.fixture
 def stand_in_volume_biased():
-    """Cycles' 5.0 ``volume_biased`` (BoolProperty, default False) on this Blender's Cycles
-    settings, for the test only; in a Blender that has it, the real one."""
-    cls = bpy.types.CyclesRenderSettings
+    """Cycles' 5.0 ``volume_biased`` (BoolProperty, default False) added to this Blender's Cycles
+    scene settings for the test only; in a Blender that has it, the real one."""
+    cls = type(bpy.context.scene.cycles)  # cycles.properties.CyclesRenderSettings
     added = "volume_biased" not in cls.bl_rna.properties
     if added:
         cls.volume_biased = bpy.props.BoolProperty(name="Biased", default=False)

@@ -14,6 +14,10 @@ from licvdb import prefs
 from conftest import licvdb_exe
 from test_addon import RecordingLayout, draw_panel
 
+#: The licvdb under test (run.py sets $LICVDB_EXECUTABLE before pytest starts); read now, since
+#: the tests unset the variable.
+LICVDB = licvdb_exe()
+
 
 @pytest.fixture
 def clean_env(monkeypatch, tmp_path):
@@ -35,7 +39,7 @@ def clean_env(monkeypatch, tmp_path):
 def link_licvdb(directory):
     os.makedirs(directory, exist_ok=True)
     dst = os.path.join(directory, "licvdb")
-    os.symlink(licvdb_exe(), dst)
+    os.symlink(LICVDB, dst)
     return dst
 
 
@@ -66,12 +70,12 @@ def test_found_in_the_source_build_tree(clean_env, monkeypatch):
 def test_environment_variable_before_path(clean_env, monkeypatch):
     link_licvdb(clean_env / "bin")
     monkeypatch.setenv("PATH", str(clean_env / "bin"))
-    monkeypatch.setenv("LICVDB_EXECUTABLE", licvdb_exe())
-    assert prefs.locate_executable()[:2] == (licvdb_exe(), "$LICVDB_EXECUTABLE")
+    monkeypatch.setenv("LICVDB_EXECUTABLE", LICVDB)
+    assert prefs.locate_executable()[:2] == (LICVDB, "$LICVDB_EXECUTABLE")
 
 
 def test_preference_before_everything(clean_env, monkeypatch):
-    monkeypatch.setenv("LICVDB_EXECUTABLE", licvdb_exe())
+    monkeypatch.setenv("LICVDB_EXECUTABLE", LICVDB)
     exe = link_licvdb(clean_env / "chosen")
     bpy.context.preferences.addons["licvdb"].preferences.executable = exe
     assert prefs.locate_executable()[:2] == (exe, "preferences")

@@ -195,11 +195,14 @@ def test_extension_loads_as_a_bl_ext_package(zips, tmp_path, bakes):
     bindir = tmp_path / "bin"
     bindir.mkdir()
     os.symlink(licvdb_exe(), bindir / "licvdb")
+    # 3.4's addon_utils.enable cannot take a dotted module name: do what 4.2's does for an
+    # extension (import bl_ext.<repository>.<id>, add the add-on entry, register).
     out = run_blender(f"""
-        import addon_utils, bpy
+        import importlib, bpy
         name = "bl_ext.user_default.licvdb"
-        addon_utils.enable(name, default_set=True, handle_error=None)
-        mod = __import__(name, fromlist=["prefs"])
+        mod = importlib.import_module(name)
+        bpy.context.preferences.addons.new().module = name
+        mod.register()
         assert name in bpy.context.preferences.addons, list(bpy.context.preferences.addons.keys())
         assert mod.prefs._addon_prefs() is not None, "preferences not found under the extension's name"
         path, source, tried = mod.prefs.locate_executable()

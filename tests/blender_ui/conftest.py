@@ -39,4 +39,6 @@ def view3d():
     with bpy.context.temp_override(window=win, area=area, region=region):
         for obj in [o for o in bpy.data.objects if o.type == "VOLUME"]:
             bpy.data.objects.remove(obj)
+        for vol in list(bpy.data.volumes):
+            bpy.data.volumes.remove(vol)
         yield
