@@ -8,6 +8,8 @@ What each guard is for, and where the facts come from, is in docs/blender.md, "B
 - ``node_use_nodes_deprecated()``: Blender 5.0 deprecated ``Material.use_nodes`` and
   ``World.use_nodes`` (always True, setting it warns and does nothing; removal planned for 6.0).
   Before 5.0 a material or world renders its node tree only with ``use_nodes`` on.
+- ``has_file_handler()``: Blender 4.1+ has ``bpy.types.FileHandler`` (drag and drop of files into
+  an editor calls an import operator). Read once, when ops_import defines its classes.
 - ``has_volume_biased(scene)``: Cycles 5.0 renders volumes with null scattering by default and
   uses ``volume_step_rate`` / ``volume_max_steps`` only with ``scene.cycles.volume_biased`` on (ray
   marching, the only algorithm before 5.0). The property's presence is the test, not a version.
@@ -38,6 +40,11 @@ def ensure_node_tree(idblock):
     elif idblock.node_tree is None or not idblock.use_nodes:
         idblock.use_nodes = True
     return idblock.node_tree
+
+
+def has_file_handler() -> bool:
+    """True where Blender has file handlers (``bpy.types.FileHandler``, 4.1+)."""
+    return hasattr(bpy.types, "FileHandler")
 
 
 def has_volume_biased(scene) -> bool:

@@ -88,8 +88,7 @@ def resolve_color_source(look: Look, grids) -> str:
 def _attribute(nodes, name: str, location):
     node = nodes.new("ShaderNodeAttribute")
     node.attribute_name = name
-    if hasattr(node, "attribute_type"):
-        node.attribute_type = "GEOMETRY"
+    node.attribute_type = "GEOMETRY"
     node.name = node.label = f"grid {name}"
     node.location = location
     return node
@@ -124,8 +123,7 @@ def build_lic_material(mat, grids, look: Look):
     for link in list(links):
         links.remove(link)
     output.location = (900, 0)
-    if hasattr(output, "target"):
-        output.target = "ALL"
+    output.target = "ALL"
 
     grids = set(grids)
     inv_voxel = 1.0 / max(look.voxel_size, 1e-9)

@@ -8,6 +8,7 @@ and type (registered in the test, removed after it). What these tests cannot sho
 
 import ast
 import os
+import re
 
 import bpy
 import pytest
@@ -22,6 +23,26 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 def import_still(bakes):
     assert bpy.ops.licvdb.import_bake(filepath=str(bakes["still"])) == {"FINISHED"}
     return bpy.context.active_object
+
+
+def test_version_checks_only_in_compat():
+    """Every version or feature check of the add-on is a named predicate in compat.py."""
+    pkg = os.path.join(ROOT, "blender_addon", "licvdb")
+    found = []
+    for name in sorted(os.listdir(pkg)):
+        if name.endswith(".py") and name != "compat.py":
+            with open(os.path.join(pkg, name), encoding="utf-8") as f:
+                src = f.read()
+            found += [f"{name}: {m}" for m in re.findall(r"bpy\.app\.version\b|hasattr\([^)]*\)", src)]
+    assert not found, found
+
+
+def test_file_handler_guard():
+    """4.1+ file handlers: absent in 3.4, so only the operator is registered here. (The other
+    branch needs bpy.types.FileHandler: not testable in 3.4.)"""
+    assert compat.has_file_handler() == hasattr(bpy.types, "FileHandler")
+    if not compat.has_file_handler():
+        assert [c.__name__ for c in ops_import.classes] == ["LICVDB_OT_import_bake"]
 
 
 # --- use_nodes (deprecated in 5.0) ----------------------------------------------------------------
