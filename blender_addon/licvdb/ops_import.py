@@ -9,7 +9,7 @@ from bpy_extras.io_utils import ImportHelper
 from . import manifest as mf
 from mathutils import Matrix, Vector
 
-from . import compat, material, prefs, props
+from . import material, prefs, props
 
 
 #: (brightness, line absorption) for dense (noise) bakes; sparse line bakes keep the panel's
@@ -176,7 +176,9 @@ def menu_import(self, context):
 
 classes = [LICVDB_OT_import_bake]
 
-if compat.has_file_handler():  # Blender 4.1+: drag and drop of .vdb files
+from .compat import has_file_handler  # noqa: E402 (the version guards, compat.py)
+
+if has_file_handler():  # Blender 4.1+: drag and drop of .vdb files
 
     class LICVDB_FH_import_bake(bpy.types.FileHandler):
         bl_idname = "LICVDB_FH_import_bake"
