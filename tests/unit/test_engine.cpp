@@ -153,6 +153,7 @@ TEST(Engine, BitIdenticalForAnyThreadCount)
         LicSettings s;
         s.engine = e;
         s.length = 8;
+        s.brick = 8; // 64 bricks: see test_bricks.cpp for 1–4 threads on every kind of bake
         s.threads = 1;
         LicResult one = convolve(field, domain, noise, s);
         s.threads = 2;

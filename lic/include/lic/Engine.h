@@ -192,8 +192,8 @@ LicStats convolveBricks(const VelocityField& field, const OutputDomain& domain, 
             if (settings.ripple) fastLicBrick<Texture, true>(field, domain, brick, w.index, texture, settings, w.fast, w.out, w.stats);
             else fastLicBrick<Texture, false>(field, domain, brick, w.index, texture, settings, w.fast, w.out, w.stats);
         } else {
-            if (settings.ripple) naiveLicBrick<Texture, true>(field, domain, brick, texture, settings, w.out, w.stats);
-            else naiveLicBrick<Texture, false>(field, domain, brick, texture, settings, w.out, w.stats);
+            if (settings.ripple) naiveLicBrick<Texture, true>(field, domain, brick, texture, settings, w.out, w.stats, progress);
+            else naiveLicBrick<Texture, false>(field, domain, brick, texture, settings, w.out, w.stats, progress);
         }
         sink(BrickChannels{i, &brick, K, w.out.data()});
     };
@@ -208,7 +208,7 @@ LicStats convolveBricks(const VelocityField& field, const OutputDomain& domain, 
                     // Isolated: a worker waiting inside nested parallel work cannot pick up
                     // another brick and clobber its own per-thread buffers.
                     tbb::this_task_arena::isolate([&] { runBrick(i); });
-                    progress.advance(layout[i].activeVoxels);
+                    if (fast) progress.advance(layout[i].activeVoxels); // naive reports per block
                 }
             },
             tbb::simple_partitioner());

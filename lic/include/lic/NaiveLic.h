@@ -4,6 +4,8 @@
 #pragma once
 
 #include "lic/Bricks.h"
+#include "lic/Parallel.h"
+#include "lic/Progress.h"
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -22,7 +24,8 @@ namespace lic {
 /// order, K runs of 512 floats (K = C, or 3C + 2 with Ripple), as fastLicBrick() does.
 template<typename Texture, bool Ripple = false>
 void naiveLicBrick(const VelocityField& field, const OutputDomain& domain, const Brick& brick,
-                   const Texture& texture, const LicSettings& settings, std::vector<float>& out, LicStats& stats)
+                   const Texture& texture, const LicSettings& settings, std::vector<float>& out, LicStats& stats,
+                   Progress& progress)
 {
     constexpr int C = Texture::kChannels;
     constexpr int K = Ripple ? 3 * C + 2 : C; // output channels, as in fastLicBrick()
@@ -36,6 +39,7 @@ void naiveLicBrick(const VelocityField& field, const OutputDomain& domain, const
     std::atomic<std::uint64_t> samplesTotal{0};
     tbb::enumerable_thread_specific<std::vector<openvdb::Vec3d>> lines;
     tbb::parallel_for(std::size_t(0), brick.blocks.size(), [&](std::size_t bi) {
+        detail::checkCancel(progress);
         std::vector<openvdb::Vec3d>& line = lines.local();
         std::uint64_t samples = 0;
         const std::uint32_t b = brick.blocks[bi];
@@ -89,6 +93,7 @@ void naiveLicBrick(const VelocityField& field, const OutputDomain& domain, const
             samples += line.size() + 1;
         }
         samplesTotal += samples;
+        progress.advance(mask.count()); // naive is slow: report per block, not per brick
     });
     stats.samples += samplesTotal.load();
     stats.streamlines += brick.activeVoxels;
