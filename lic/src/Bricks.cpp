@@ -44,13 +44,10 @@ BrickLayout::BrickLayout(const OutputDomain& domain, int dim)
 
 int defaultBrickDim(const LicSettings& settings)
 {
-    // Measured on the 128³ abc bake (docs/performance.md): 64 is the fastest for kernels up to
-    // ~24 voxels; longer kernels need larger bricks to keep the window tails a small part of
-    // each line.
-    const double L = settings.length;
-    if (L <= 24) return 64;
-    if (L <= 48) return 96;
-    return 128;
+    // Measured on the 128³ abc bake (docs/performance.md): 64 for kernels up to ~24 voxels;
+    // longer kernels need larger bricks to keep the window tails (n samples past each end of a
+    // line) a small part of each line. Powers of two, so power-of-two volumes split evenly.
+    return settings.length <= 24 ? 64 : 128;
 }
 
 int ghostMargin(const LicSettings& settings)
