@@ -9,10 +9,6 @@
 
 namespace lic {
 
-namespace {
-int floorDiv(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
-} // namespace
-
 BrickLayout::BrickLayout(const OutputDomain& domain, int dim)
     : mDim(dim)
 {
@@ -22,7 +18,7 @@ BrickLayout::BrickLayout(const OutputDomain& domain, int dim)
     std::map<openvdb::Coord, std::size_t> index; // brick coordinate → brick, ordered x-major
     for (std::size_t b = 0; b < domain.blockCount(); ++b) {
         const openvdb::Coord& o = domain.blockOrigin(b);
-        const openvdb::Coord key(floorDiv(o[0], dim), floorDiv(o[1], dim), floorDiv(o[2], dim));
+        const openvdb::Coord key(detail::floorDiv(o[0], dim), detail::floorDiv(o[1], dim), detail::floorDiv(o[2], dim));
         index.try_emplace(key, 0);
     }
     mBricks.resize(index.size());
@@ -35,7 +31,7 @@ BrickLayout::BrickLayout(const OutputDomain& domain, int dim)
     }
     for (std::size_t b = 0; b < domain.blockCount(); ++b) {
         const openvdb::Coord& o = domain.blockOrigin(b);
-        Brick& brick = mBricks[index[openvdb::Coord(floorDiv(o[0], dim), floorDiv(o[1], dim), floorDiv(o[2], dim))]];
+        Brick& brick = mBricks[index[openvdb::Coord(detail::floorDiv(o[0], dim), detail::floorDiv(o[1], dim), detail::floorDiv(o[2], dim))]];
         brick.blocks.push_back(std::uint32_t(b));
         brick.activeVoxels += domain.blockMask(b).count();
     }
