@@ -26,6 +26,7 @@ BrickLayout::BrickLayout(const OutputDomain& domain, int dim)
     for (auto& [key, slot] : index) {
         slot = i;
         const openvdb::Coord lo(key[0] * dim, key[1] * dim, key[2] * dim);
+        mBricks[i].id = i;
         mBricks[i].box = openvdb::CoordBBox(lo, lo + openvdb::Coord(dim - 1));
         ++i;
     }
@@ -36,6 +37,22 @@ BrickLayout::BrickLayout(const OutputDomain& domain, int dim)
         brick.activeVoxels += domain.blockMask(b).count();
     }
     for (const Brick& b : mBricks) mMaxBlocks = std::max(mMaxBlocks, b.blocks.size());
+}
+
+BrickLayout BrickLayout::subset(const std::vector<std::size_t>& ids) const
+{
+    BrickLayout out(*this);
+    out.mBricks.clear();
+    out.mMaxBlocks = 0;
+    for (std::size_t id : ids) {
+        if (id >= mBricks.size()) {
+            throw InputError("brick " + std::to_string(id) + " is not in a layout of " + std::to_string(mBricks.size()) +
+                             " bricks");
+        }
+        out.mBricks.push_back(mBricks[id]);
+        out.mMaxBlocks = std::max(out.mMaxBlocks, mBricks[id].blocks.size());
+    }
+    return out;
 }
 
 int defaultBrickDim(const LicSettings& settings)
