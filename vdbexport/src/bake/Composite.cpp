@@ -123,7 +123,8 @@ Compositor::SpotVoxel Compositor::composeSpots(const Raw& raw, float widthT, flo
 void Compositor::consume(const lic::BrickChannels& bc)
 {
     Moments moments;
-    for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i) consumeBlock(bc, i, moments);
+    for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i)
+        if (!bc.blockTouched || bc.blockTouched[i]) consumeBlock(bc, i, moments);
     mMoments[bc.index] = moments;
 }
 
