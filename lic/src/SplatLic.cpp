@@ -262,13 +262,20 @@ LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain,
             }
         });
     });
-    std::vector<openvdb::Vec3f> points;
+    std::vector<openvdb::Vec3f> points, tangents;
     std::vector<Xform> xforms;
     std::uint64_t samples = 0;
     for (std::size_t s = 0; s < lines.size(); ++s) {
         lines[s].first = points.size();
         points.insert(points.end(), linePts[s].begin(), linePts[s].end());
         xforms.insert(xforms.end(), lineXf[s].begin(), lineXf[s].end());
+        // Unit direction at every sample (central differences; one-sided at the ends).
+        const std::vector<openvdb::Vec3f>& p = linePts[s];
+        for (int j = 0; j < int(p.size()); ++j) {
+            openvdb::Vec3f t = p[std::size_t(std::min(int(p.size()) - 1, j + 1))] - p[std::size_t(std::max(0, j - 1))];
+            const float tl = t.length();
+            tangents.push_back(tl > 0 ? t / tl : openvdb::Vec3f(0.0f));
+        }
         samples += std::uint64_t(lines[s].count);
         std::vector<openvdb::Vec3f>().swap(linePts[s]);
         std::vector<Xform>().swap(lineXf[s]);
@@ -298,7 +305,10 @@ LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain,
 
     // 3. Each brick deposits the footprints of its spots into its own voxels.
     constexpr int kCoarse = 4; // rasterise around every 4th sample (2 voxels apart at h = ½)
-    const double rho = reach + 0.5 * kCoarse * h + 0.5;
+    // A voxel within reach of the line inside a coarse sample's slab (half-width S·h/2 + ½ along
+    // the line) lies within √(reach² + slab²) of that sample.
+    const double slabHalf = 0.5 * kCoarse * h + 0.5;
+    const double rho = std::sqrt(reach * reach + slabHalf * slabHalf) + 0.25;
     tbb::enumerable_thread_specific<SplatScratch> scratch;
     auto runBrick = [&](std::size_t b) {
         SplatScratch& sc = scratch.local();
@@ -328,63 +338,45 @@ LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain,
             sc.touched.clear();
             // Nearest point of the line to voxel v, searched on the segments beside the sample
             // that v's projection on the line's local direction at sample j points to.
-            auto nearestOnLine = [&](const openvdb::Vec3d& v, int j, double& d2, double& arcOut, openvdb::Vec3d& off,
-                                     int& footOut) {
-                const int jn = std::min(L.count - 1, j + 1), jp = std::max(0, j - 1);
-                openvdb::Vec3d t = openvdb::Vec3d(P[jn]) - openvdb::Vec3d(P[jp]);
-                const double tl = t.length();
-                int jf = j;
-                if (tl > 0) jf = std::clamp(j + int(std::lround((v - openvdb::Vec3d(P[j])).dot(t) / (tl * h))), 0, L.count - 1);
-                d2 = 1e300;
-                for (int k = std::max(0, jf - 1); k < std::min(L.count - 1, jf + 1); ++k) {
-                    const openvdb::Vec3d A(P[k]), B(P[k + 1]);
-                    const openvdb::Vec3d AB = B - A;
-                    const double ab2 = AB.lengthSqr();
-                    const double u = ab2 > 0 ? std::clamp((v - A).dot(AB) / ab2, 0.0, 1.0) : 0.0;
-                    const double dd = (v - (A + AB * u)).lengthSqr();
-                    if (dd < d2) {
-                        d2 = dd;
-                        arcOut = (double(k - L.centre) + u) * h;
-                        off = v - (A + AB * u);
-                        footOut = u < 0.5 ? k : k + 1;
-                    }
-                }
-                if (L.count == 1) {
-                    off = v - openvdb::Vec3d(P[0]);
-                    d2 = off.lengthSqr();
-                    arcOut = 0;
-                    footOut = 0;
-                }
-            };
+            // The voxel's nearest point on the line, near sample j: the voxel's projection on the
+            // local direction at j picks the sample jf, then the distance to the line through
+            // P_jf along its direction (samples are h apart, so this is the segment distance to
+            // within h²/8). All in float: positions are output index units.
+            const openvdb::Vec3f* T = &tangents[L.first];
             for (int j = 0;; j = std::min(j + kCoarse, L.count - 1)) {
-                const openvdb::Vec3d c(P[j]);
+                const openvdb::Vec3f c = P[j], dir = T[j];
+                const bool end = j == 0 || j == L.count - 1;
+                const float slab = 0.5f * float(kCoarse * h) + 0.5f, invH = float(1.0 / h);
                 const int x0 = std::max(bmin[0], int(std::ceil(c[0] - rho))), x1 = std::min(bmax[0], int(std::floor(c[0] + rho)));
                 for (int x = x0; x <= x1; ++x) {
-                    const double dx = x - c[0], ry2 = rho * rho - dx * dx;
+                    const float dx = float(x) - c[0], ry2 = float(rho * rho) - dx * dx;
                     if (ry2 < 0) continue;
-                    const double ry = std::sqrt(ry2);
+                    const float ry = std::sqrt(ry2);
                     const int y0 = std::max(bmin[1], int(std::ceil(c[1] - ry))), y1 = std::min(bmax[1], int(std::floor(c[1] + ry)));
                     for (int y = y0; y <= y1; ++y) {
-                        const double dy = y - c[1], rz2 = ry2 - dy * dy;
+                        const float dy = float(y) - c[1], rz2 = ry2 - dy * dy;
                         if (rz2 < 0) continue;
-                        const double rz = std::sqrt(rz2);
+                        const float rz = std::sqrt(rz2);
                         const int z0 = std::max(bmin[2], int(std::ceil(c[2] - rz))), z1 = std::min(bmax[2], int(std::floor(c[2] + rz)));
+                        const float pxy = dx * dir[0] + dy * dir[1];
                         for (int z = z0; z <= z1; ++z) {
+                            const float along = pxy + (float(z) - c[2]) * dir[2];
+                            if (!end && std::abs(along) > slab) continue;
                             const std::int64_t l = bi.localOf(openvdb::Coord(x, y, z));
                             if (l < 0) continue;
-                            double d2 = 0, a = 0;
-                            openvdb::Vec3d off(0.0);
-                            int ft = 0;
-                            nearestOnLine(openvdb::Vec3d(x, y, z), j, d2, a, off, ft);
+                            const int jf = std::clamp(j + int(std::floor(along * invH + 0.5f)), 0, L.count - 1);
+                            const openvdb::Vec3f w = openvdb::Vec3f(float(x), float(y), float(z)) - P[jf];
+                            const float a = w.dot(T[jf]);
+                            const float d2 = w.lengthSqr() - a * a;
                             const std::size_t li = std::size_t(l);
                             const bool fresh = sc.stamp[li] != gen;
                             if (fresh || d2 < sc.best[li]) {
                                 if (fresh) sc.touched.push_back(l);
                                 sc.stamp[li] = gen;
-                                sc.best[li] = float(d2);
-                                sc.arc[li] = float(a);
-                                sc.offset[li] = openvdb::Vec3f(off);
-                                sc.foot[li] = ft;
+                                sc.best[li] = d2;
+                                sc.arc[li] = float(double(jf - L.centre) * h) + a;
+                                sc.offset[li] = w - T[jf] * a;
+                                sc.foot[li] = jf;
                             }
                         }
                     }
