@@ -547,7 +547,8 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
     std::vector<std::string> paths;
     for (int f = 1; f <= frames; ++f) paths.push_back(framePath(recipe.output.path, f, frames));
     openvdb::GridPtrVec firstGrids;
-    try {
+    OutputSet output; // frames and manifest, staged unseen and committed together (VdbIO.h)
+    {
         for (int f = 1; f <= frames; ++f) {
             const Frame fr = f == 1 ? std::move(first) : composeFrameGrids(f);
             openvdb::GridPtrVec fileGrids{makeDensity(fr.density, f)};
@@ -564,14 +565,8 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
             if (recipe.output.half)
                 for (const auto& g : fileGrids) g->setSaveFloatAsHalf(true);
             if (f == 1) firstGrids = fileGrids;
-            writeVdbAtomic(paths[std::size_t(f - 1)], fileGrids);
+            output.addVdb(paths[std::size_t(f - 1)], fileGrids);
         }
-    } catch (...) {
-        for (const auto& p : paths) {
-            std::error_code ec;
-            fs::remove(p, ec);
-        }
-        throw;
     }
     nlohmann::json manifest;
     manifest["licvdb_version"] = LICVDB_VERSION;
@@ -594,7 +589,9 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
                                      {"voxel_size", {vs[0], vs[1], vs[2]}},
                                      {"world_bbox", bboxJson(worldBBoxOf(*g))}});
     }
-    writeTextAtomic(manifestPath(recipe.output.path), manifest.dump(2) + "\n");
+    for (const auto& p : paths) manifest["sha256"][fs::path(p).filename().string()] = output.sha256(p);
+    output.addText(manifestPath(recipe.output.path), manifest.dump(2) + "\n");
+    output.commit();
     const double tWrite = seconds(t3);
 
     const lic::LicStats& st = result.stats;
