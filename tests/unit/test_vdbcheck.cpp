@@ -318,3 +318,34 @@ TEST(Sha256, KnownDigests)
     }
     EXPECT_EQ(million.hex(), "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0");
 }
+
+// Found by fuzz_vdb (corpus/vdb/regress-half-flag-metadata): OpenVDB 10 takes a grid's half-float
+// flag from its `is_saved_as_half_float` metadata, not from the descriptor's `_HalfFloat`. With
+// the metadata renamed, OpenVDB reads half-float blocks as full floats and met a length word
+// in the middle of data (a 241 GB allocation); the check must read the flag the same way.
+TEST_F(VdbCheckTest, HalfFloatFlagIsTakenFromTheMetadataAsOpenVdbDoes)
+{
+    const auto samples = vdb_samples::writeVdbSamples(mDir, 8);
+    std::string bytes = readFile((mDir / "mantaflow_half_blosc.vdb").string());
+    const std::string key = "is_saved_as_half_float";
+    std::size_t renamed = 0;
+    for (std::size_t at = bytes.find(key); at != std::string::npos; at = bytes.find(key, at + 1), ++renamed)
+        bytes.replace(at + key.size() - 5, 5, "doubl");
+    ASSERT_EQ(renamed, 3u); // density, flame, velocity
+    const std::string path = (mDir / "renamed.vdb").string();
+    writeFile(path, bytes);
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkVdbStructure(path); }), "is corrupt");
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::describeVdb(path); }), "is corrupt");
+    // The fuzzer's own reproducer.
+    const std::string regress = std::string(LICVDB_SOURCE_DIR) + "/tests/fuzz/corpus/vdb/regress-half-flag-metadata";
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkVdbStructure(regress); }), "is corrupt");
+    // The flag itself of another type is refused by name.
+    std::string typed = readFile((mDir / "mantaflow_half_blosc.vdb").string());
+    const std::size_t at = typed.find(key);
+    ASSERT_NE(at, std::string::npos);
+    const std::size_t typeAt = at + key.size() + 4; // the type name "bool" after its length
+    ASSERT_EQ(typed.substr(typeAt, 4), "bool");
+    typed.replace(typeAt, 4, "bogo");
+    writeFile(path, typed);
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkVdbStructure(path); }), "half-float flag is a bogo");
+}

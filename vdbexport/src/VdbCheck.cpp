@@ -218,9 +218,15 @@ private:
 
     // ---- parts -------------------------------------------------------------------------
     void header(VdbCheckResult& r);
-    /// MetaMap::readMeta. Returns the `__delayedload` entry count (or -1 if absent).
-    int64_t metaMap();
-    void metadataValue(const std::string& name, const std::string& type, uint32_t bytes, int64_t& delayedCount);
+    /// What a grid's metadata decides about reading it.
+    struct MetaInfo
+    {
+        int64_t delayedCount = -1; ///< entries of the `__delayedload` table; -1 if absent
+        int halfFloat = -1;        ///< `is_saved_as_half_float`: 0, 1, or -1 if absent
+    };
+    /// MetaMap::readMeta.
+    MetaInfo metaMap();
+    void metadataValue(const std::string& name, const std::string& type, uint32_t bytes, MetaInfo& info);
     void delayedLoad(uint32_t bytes, int64_t& count);
     void transform(bool nested = false);
     void tree(const TreeSpec& spec, VdbGridCheck& g);
@@ -287,14 +293,13 @@ void Checker::checkBools(const char* data, uint64_t n)
             throw corrupt("a bool value is " + std::to_string(static_cast<unsigned char>(data[i])) + ", not 0 or 1");
 }
 
-int64_t Checker::metaMap()
+Checker::MetaInfo Checker::metaMap()
 {
     const uint32_t count = get<uint32_t>("the metadata count");
     // Each entry takes at least 12 bytes (two string lengths and a size).
     if (uint64_t(count) * 12 > left())
         throw truncated("it claims " + std::to_string(count) + " metadata entries, more than the file can hold");
-    int64_t delayedCount = -1;
-    std::set<std::string> names;
+    MetaInfo info;
     for (uint32_t i = 0; i < count; ++i) {
         const std::string name = string("a metadata name");
         const Scope s(*this, "metadata " + quote(name));
@@ -302,16 +307,20 @@ int64_t Checker::metaMap()
         const uint32_t bytes = get<uint32_t>("a metadata size");
         if (bytes > left())
             throw truncated("the value claims " + std::to_string(bytes) + " bytes, more than the file has left");
-        metadataValue(name, type, bytes, delayedCount);
+        metadataValue(name, type, bytes, info);
     }
-    return delayedCount;
+    return info;
 }
 
-void Checker::metadataValue(const std::string& name, const std::string& type, uint32_t bytes, int64_t& delayedCount)
+void Checker::metadataValue(const std::string& name, const std::string& type, uint32_t bytes, MetaInfo& info)
 {
-    (void)name;
+    // OpenVDB 10 keeps a grid's half-float flag in this metadata (GridBase::saveFloatAsHalf),
+    // and reading the metadata replaces what the grid descriptor said: this value decides.
+    const bool halfFlag = name == openvdb::GridBase::META_SAVE_HALF_FLOAT;
+    if (halfFlag && type != openvdb::typeNameAsString<bool>())
+        throw corrupt("the half-float flag is a " + type + ", not a bool");
     if (type == openvdb::io::DelayedLoadMetadata::staticTypeName()) {
-        delayedLoad(bytes, delayedCount);
+        delayedLoad(bytes, info.delayedCount);
         return;
     }
     const auto& sizes = metadataSizes();
@@ -323,6 +332,7 @@ void Checker::metadataValue(const std::string& name, const std::string& type, ui
             char b = 0;
             read(&b, 1, "a bool value");
             checkBools(&b, 1);
+            if (halfFlag) info.halfFloat = b;
             return;
         }
         skip(bytes, "a metadata value");
@@ -627,7 +637,7 @@ VdbCheckResult Checker::run()
     skip(36, "the header's UUID");
     {
         const Scope s(*this, "file metadata");
-        metaMap();
+        (void)metaMap();
     }
     const int32_t gridCount = get<int32_t>("the grid count");
     if (gridCount < 0) throw corrupt("the grid count is " + std::to_string(gridCount));
@@ -675,12 +685,16 @@ VdbCheckResult Checker::run()
         if (g.compression & ~uint32_t(COMPRESS_ZIP | COMPRESS_ACTIVE_MASK | COMPRESS_BLOSC))
             throw corrupt("compression flags " + std::to_string(g.compression) + " are not OpenVDB's");
         mCompression = g.compression;
-        mHalf = g.halfFloat;
-        int64_t delayedCount = -1;
+        MetaInfo meta;
         {
             const Scope s(*this, "metadata");
-            delayedCount = metaMap();
+            meta = metaMap();
         }
+        const int64_t delayedCount = meta.delayedCount;
+        // What OpenVDB 10 will use: the metadata flag, false without one (the descriptor's
+        // `_HalfFloat` suffix is overwritten when the grid's metadata is read).
+        g.halfFloat = meta.halfFloat == 1;
+        mHalf = g.halfFloat;
         transform();
         if (g.instance) {
             if (hasOffsets && int64_t(mPos) != endPos)

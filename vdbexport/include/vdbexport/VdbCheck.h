@@ -45,7 +45,8 @@ struct VdbCheckResult
 /// each tree: buffer count, root tiles and children (aligned, unique, within ±2^30), internal
 /// node masks (no slot both child and value), and for every node's value block and every leaf
 /// buffer the byte count it stores against what that node can hold given the grid's compression
-/// flags and half-float storage (per-node mask metadata, inactive values, selection mask, raw,
+/// flags and half-float storage (the `is_saved_as_half_float` metadata, which OpenVDB 10 obeys;
+/// per-node mask metadata, inactive values, selection mask, raw,
 /// zip or blosc block: its header sizes must match, and it is decoded into a guarded scratch
 /// buffer that must come out exactly full). Grid types licvdb does not read (point grids) have
 /// their metadata and transform checked and their tree skipped (VdbGridCheck::skipReason).
