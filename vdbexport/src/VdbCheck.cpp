@@ -356,6 +356,11 @@ void Checker::delayedLoad(uint32_t bytes, int64_t& delayedCount)
     };
     need(8, "the delayed-load table");
     const uint32_t count = get<uint32_t>("the delayed-load count");
+    // One entry per leaf, and every leaf takes at least 129 bytes of the file (two value masks
+    // and a compression byte): a larger count cannot be true (and would cost memory to decode).
+    if (uint64_t(count) * 129 > mSize)
+        throw corrupt("the delayed-load table lists " + std::to_string(count) + " leaves, more than a file of "
+                      + std::to_string(mSize) + " bytes can hold");
     delayedCount = count;
     for (int part = 0; part < 2; ++part) {
         const uint64_t elem = part == 0 ? 1 : 8;
