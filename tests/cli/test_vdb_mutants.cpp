@@ -73,6 +73,12 @@ TEST_F(VdbMutantsTest, InfoCheckExitsZeroForIntactFilesAndTwoWithTheReasonOtherw
         EXPECT_EQ(r.code, 0) << r.describe();
         EXPECT_NE(r.out.find("intact"), std::string::npos) << r.describe();
     }
+    for (const auto& [path, words] : std::vector<std::pair<fs::path, std::string>>{
+             {w / "missing.vdb", "not found"}, {w, "is a directory"}}) {
+        const RunResult r = run({"info", "--check", path.string()});
+        EXPECT_EQ(r.code, 2) << r.describe();
+        EXPECT_NE(r.err.find(words), std::string::npos) << r.describe();
+    }
     const RunResult j = run({"info", "--check", "--json", samples[0]});
     ASSERT_EQ(j.code, 0) << j.describe();
     const auto ok = nlohmann::json::parse(j.out);

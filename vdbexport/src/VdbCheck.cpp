@@ -25,6 +25,7 @@
 #include <set>
 #include <vector>
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 namespace vdbexport {
@@ -743,6 +744,13 @@ VdbCheckResult Checker::run()
 VdbCheckResult checkVdbStructure(const std::string& path)
 {
     openvdb::initialize();
+    struct stat st{};
+    if (path.empty()) throw lic::InputError("no .vdb file given; expected a path to a .vdb file");
+    if (::stat(path.c_str(), &st) != 0)
+        throw lic::InputError("file " + quote(path) + " not found; expected a .vdb file");
+    if (S_ISDIR(st.st_mode)) throw lic::InputError(quote(path) + " is a directory; expected a .vdb file");
+    if (S_ISREG(st.st_mode) && st.st_size == 0)
+        throw lic::InputError("file " + quote(path) + " is empty (0 bytes); expected a .vdb file");
     Checker checker(path);
     VdbCheckResult r = checker.run();
     const long pages = ::sysconf(_SC_PHYS_PAGES), pageSize = ::sysconf(_SC_PAGESIZE);
