@@ -161,7 +161,7 @@ TEST_F(VdbMutantsTest, MutantsExitZeroOrTwoNeverCrashNeverHang)
     }
     std::cout << "[ mutants  ] " << runs << " runs (" << runs - bakes << " info --check, " << bakes << " bake) on mutants of "
               << files.size() << " files: " << zero << " exit 0, " << two << " exit 2, slowest " << slowest << " s\n";
-    EXPECT_GE(runs, 150);
+    EXPECT_GE(runs, perKind >= 8 ? 150 : 40);
 }
 
 // Two bakes with different seeds writing the same output, again and again: afterwards the
