@@ -24,6 +24,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from . import compat
+
 #: Blender's colour ramp holds at most this many elements.
 MAX_RAMP_ELEMENTS = 32
 
@@ -86,8 +88,7 @@ def resolve_color_source(look: Look, grids) -> str:
 def _attribute(nodes, name: str, location):
     node = nodes.new("ShaderNodeAttribute")
     node.attribute_name = name
-    if hasattr(node, "attribute_type"):
-        node.attribute_type = "GEOMETRY"
+    node.attribute_type = "GEOMETRY"
     node.name = node.label = f"grid {name}"
     node.location = location
     return node
@@ -111,8 +112,7 @@ def build_lic_material(mat, grids, look: Look):
     Returns a dict of the nodes a caller (or a test) may want: ``output``, ``emission``,
     ``absorption``, ``ramp`` (or None), ``halo_shell`` (or None).
     """
-    mat.use_nodes = True
-    tree = mat.node_tree
+    tree = compat.ensure_node_tree(mat)
     nodes, links = tree.nodes, tree.links
     output = next((n for n in nodes if n.bl_idname == "ShaderNodeOutputMaterial"), None)
     for n in list(nodes):
@@ -123,8 +123,7 @@ def build_lic_material(mat, grids, look: Look):
     for link in list(links):
         links.remove(link)
     output.location = (900, 0)
-    if hasattr(output, "target"):
-        output.target = "ALL"
+    output.target = "ALL"
 
     grids = set(grids)
     inv_voxel = 1.0 / max(look.voxel_size, 1e-9)
@@ -210,9 +209,15 @@ def build_lic_material(mat, grids, look: Look):
 
 def setup_render(scene, step_rate: float = 0.5):
     """Render settings that suit LIC volumes: Cycles, black world, a volume step fine enough for
-    thin lines, no denoising where this Blender has no OpenImageDenoise."""
+    thin lines, no denoising where this Blender has no OpenImageDenoise.
+
+    Where Cycles has the *Biased* volume option (5.0+) it is turned on: the thin-line look is
+    made for ray marching at ``step_rate`` (half a voxel), which 5.0's default null scattering
+    ignores (see compat.has_volume_biased and docs/blender.md)."""
     scene.render.engine = "CYCLES"
     cycles = scene.cycles
+    if compat.has_volume_biased(scene):
+        cycles.volume_biased = True
     cycles.volume_step_rate = step_rate
     cycles.volume_preview_step_rate = step_rate
     cycles.volume_max_steps = max(cycles.volume_max_steps, 1024)
@@ -225,8 +230,8 @@ def setup_render(scene, step_rate: float = 0.5):
         import bpy
 
         world = scene.world = bpy.data.worlds.new("licvdb black")
-    world.use_nodes = True
-    bg = next((n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground"), None)
+    tree = compat.ensure_node_tree(world)
+    bg = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground"), None) if tree else None
     if bg is not None:
         bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
         bg.inputs["Strength"].default_value = 0.0

@@ -97,12 +97,12 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
         vs = man.grids[0].voxel_size if man and man.grids else (s.voxel_size,) * 3
         obj.matrix_world = Matrix.Translation(-0.5 * Vector(vs))
         s.half_voxel_shift = True
-    # Set without triggering a rebuild per property.
-    s["look"] = 1 if "halo" in loaded else 0
-    if man and (man.recipe.get("input") or {}).get("type") == "noise":
-        # Dense LIC fills its whole box: less emission and more absorption, so the streaks on and
-        # just under the surface show instead of a glow summed through the volume.
-        s["brightness"], s["line_absorption"] = DENSE_LOOK
+    with props.rebuild_suspended():  # one rebuild below, not one per property
+        s.look = "HALOS" if "halo" in loaded else "LINES"
+        if man and (man.recipe.get("input") or {}).get("type") == "noise":
+            # Dense LIC fills its whole box: less emission and more absorption, so the streaks on
+            # and just under the surface show instead of a glow summed through the volume.
+            s.brightness, s.line_absorption = DENSE_LOOK
     props.apply_look(obj)
 
     for o in context.view_layer.objects:
@@ -148,8 +148,11 @@ class LICVDB_OT_import_bake(bpy.types.Operator, ImportHelper):
                                          description="Cycles, black world, volume step, no denoising without OIDN")
 
     def invoke(self, context, event):
-        if self.filepath or (self.directory and len(self.files)):
-            return self.execute(context)  # drag and drop
+        # Files given by the caller (drag and drop, a script) import at once; otherwise open the
+        # file browser. Not ``if self.filepath``: started from the menu, Blender restores the last
+        # import's filepath, which is_property_set does not count as set (docs/blender.md).
+        if self.properties.is_property_set("filepath") or (self.directory and len(self.files)):
+            return self.execute(context)
         return ImportHelper.invoke(self, context, event)
 
     def execute(self, context):
@@ -174,7 +177,9 @@ def menu_import(self, context):
 
 classes = [LICVDB_OT_import_bake]
 
-if hasattr(bpy.types, "FileHandler"):  # Blender 4.1+: drag and drop of .vdb files
+from .compat import has_file_handler  # noqa: E402 (the version guards, compat.py)
+
+if has_file_handler():  # Blender 4.1+: drag and drop of .vdb files
 
     class LICVDB_FH_import_bake(bpy.types.FileHandler):
         bl_idname = "LICVDB_FH_import_bake"

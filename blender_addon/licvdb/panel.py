@@ -3,7 +3,7 @@ fluid domain."""
 
 import bpy
 
-from . import ops_bake
+from . import compat, ops_bake, prefs
 
 
 class LICVDB_PT_look(bpy.types.Panel):
@@ -32,7 +32,8 @@ class LICVDB_PT_look(bpy.types.Panel):
             layout.label(text="This bake has no halo grid", icon="INFO")
         layout.prop(s, "color_source")
         mat = context.active_object.active_material
-        ramp = mat.node_tree.nodes.get("colormap") if mat and mat.use_nodes else None
+        tree = mat.node_tree if mat else None  # (use_nodes is deprecated in 5.0: read the tree)
+        ramp = tree.nodes.get("colormap") if tree else None
         if ramp is not None:
             layout.label(text=f"Colour ramp ({s.colormap_name or 'bake colormap'})")
             layout.template_color_ramp(ramp, "color_ramp", expand=True)
@@ -41,6 +42,10 @@ class LICVDB_PT_look(bpy.types.Panel):
         if s.frames > 1:
             box.label(text=f"{s.frames} frames" + (", seamless loop" if s.cyclic else ""))
         box.label(text=f"Voxel: {s.voxel_size:.4g}")
+        if compat.volume_step_rate_ignored(context.scene):
+            col = layout.column(align=True)
+            col.label(text="Cycles ignores the volume step rate:", icon="ERROR")
+            col.label(text="turn on Render > Volumes > Biased")
 
 
 class LICVDB_PT_bake(bpy.types.Panel):
@@ -53,6 +58,10 @@ class LICVDB_PT_bake(bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         s = context.scene.licvdb_bake
+        if prefs.find_executable(context) is None:
+            col = layout.column(align=True)
+            col.label(text="licvdb executable not found", icon="ERROR")
+            col.label(text="Set it in Preferences > Add-ons > licvdb")
         if ops_bake.fluid_domain(context.active_object) is None:
             layout.label(text="Select a smoke domain (OpenVDB cache)", icon="INFO")
         col = layout.column(align=True)

@@ -5,7 +5,13 @@ import shutil
 
 import bpy
 
-#: Build directories of a source checkout, tried when licvdb is not on PATH.
+#: Install folders tried after PATH: Blender started from a desktop launcher (or macOS's Finder)
+#: may not have them on PATH. ``cmake --install`` defaults to /usr/local; ~/.local/bin is the usual
+#: per-user prefix.
+_EXTRA_BIN_DIRS = ("~/.local/bin", "/usr/local/bin", "/opt/homebrew/bin")
+
+#: Build directories of a source checkout, tried last (only when the add-on is loaded from one;
+#: an installed add-on or extension lives elsewhere and finds nothing here).
 _BUILD_DIRS = ("build", "build-release", "build-blender")
 
 
@@ -15,25 +21,52 @@ def _addon_prefs(context=None):
     return addon.preferences if addon else None
 
 
-def find_executable(context=None) -> str | None:
-    """The licvdb executable: the preference if set, else ``$LICVDB_EXECUTABLE``, else ``licvdb``
-    on PATH, else a build tree next to the add-on's source checkout. None if none exists."""
+def _is_executable(path: str) -> bool:
+    return bool(path) and os.path.isfile(path) and os.access(path, os.X_OK)
+
+
+def locate_executable(context=None):
+    """Where ``licvdb`` is: ``(path, source, tried)``.
+
+    In this order: the add-on preference if set, else ``$LICVDB_EXECUTABLE`` if set (either one,
+    once set, is used or reported as wrong; neither falls back to a different licvdb), else
+    ``licvdb`` on PATH, else ~/.local/bin, /usr/local/bin, /opt/homebrew/bin, else a build tree of
+    the source checkout the add-on was loaded from. ``path`` is None when nothing works;
+    ``source`` names where it was found ("preferences", "$LICVDB_EXECUTABLE", "PATH", a folder or
+    "build tree"); ``tried`` lists what was looked at, for the message."""
     prefs = _addon_prefs(context)
     if prefs and prefs.executable:
         path = bpy.path.abspath(prefs.executable)
-        return path if os.path.isfile(path) and os.access(path, os.X_OK) else None
-    env = os.environ.get("LICVDB_EXECUTABLE")
-    if env and os.path.isfile(env) and os.access(env, os.X_OK):
-        return env
+        if _is_executable(path):
+            return path, "preferences", []
+        return None, None, [f"preferences: \"{prefs.executable}\" is not an executable file"]
+    env = os.environ.get("LICVDB_EXECUTABLE", "")
+    if env:
+        if _is_executable(env):
+            return env, "$LICVDB_EXECUTABLE", []
+        return None, None, [f"$LICVDB_EXECUTABLE: \"{env}\" is not an executable file"]
+    tried = ["preferences: empty", "$LICVDB_EXECUTABLE: unset"]
     found = shutil.which("licvdb")
     if found:
-        return found
+        return found, "PATH", tried
+    tried.append("PATH: no licvdb")
+    for d in _EXTRA_BIN_DIRS:
+        p = os.path.join(os.path.expanduser(d), "licvdb")
+        if _is_executable(p):
+            return p, d, tried
+    tried.append("not in " + ", ".join(_EXTRA_BIN_DIRS))
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     for d in _BUILD_DIRS:
         p = os.path.join(root, d, "vdbexport", "licvdb")
-        if os.path.isfile(p) and os.access(p, os.X_OK):
-            return p
-    return None
+        if _is_executable(p):
+            return p, "build tree", tried
+    tried.append("no build tree beside the add-on")
+    return None, None, tried
+
+
+def find_executable(context=None) -> str | None:
+    """The licvdb executable (see locate_executable), or None if none works."""
+    return locate_executable(context)[0]
 
 
 def half_voxel_shift(context=None) -> bool:
@@ -49,12 +82,10 @@ def half_voxel_shift(context=None) -> bool:
 
 
 def missing_executable_message(context=None) -> str:
-    prefs = _addon_prefs(context)
-    if prefs and prefs.executable:
-        return (f"licvdb executable \"{prefs.executable}\" (add-on preferences) does not exist or is not "
-                "executable; fix the path in Edit > Preferences > Add-ons > licvdb")
-    return ("licvdb executable not found (not on PATH, $LICVDB_EXECUTABLE unset, no build tree): build it "
-            "(scripts/build) and set its path in Edit > Preferences > Add-ons > licvdb")
+    """Why licvdb was not found and what to do, for operator reports and the UI."""
+    tried = locate_executable(context)[2]
+    return ("licvdb executable not found (" + "; ".join(tried) + "): install licvdb (its package or "
+            "`cmake --install`) so it is on PATH, or set its path in Edit > Preferences > Add-ons > licvdb")
 
 
 class LICVDB_AddonPreferences(bpy.types.AddonPreferences):
@@ -62,7 +93,8 @@ class LICVDB_AddonPreferences(bpy.types.AddonPreferences):
 
     executable: bpy.props.StringProperty(
         name="licvdb executable",
-        description="Path to the licvdb command-line tool; empty = $LICVDB_EXECUTABLE, PATH or the build tree",
+        description="Path to the licvdb command-line tool; empty = $LICVDB_EXECUTABLE, else licvdb on PATH "
+                    "(or in ~/.local/bin, /usr/local/bin)",
         subtype="FILE_PATH",
         default="",
     )
@@ -81,9 +113,14 @@ class LICVDB_AddonPreferences(bpy.types.AddonPreferences):
         layout = self.layout
         layout.prop(self, "executable")
         layout.prop(self, "half_voxel")
-        found = find_executable(context)
-        layout.label(text=f"Using: {found}" if found else "licvdb not found: set the path above",
-                     icon="CHECKMARK" if found else "ERROR")
+        found, source, tried = locate_executable(context)
+        if found:
+            layout.label(text=f"Using: {found} ({source})", icon="CHECKMARK")
+        else:
+            col = layout.column(align=True)
+            col.label(text="licvdb not found: set the path above, or put licvdb on PATH", icon="ERROR")
+            for line in tried:
+                col.label(text=line)
 
 
 classes = (LICVDB_AddonPreferences,)

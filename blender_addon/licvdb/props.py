@@ -1,6 +1,7 @@
 """Per-object look settings (``obj.licvdb``) and per-scene bake settings (``scene.licvdb_bake``)."""
 
 import json
+from contextlib import contextmanager
 
 import bpy
 
@@ -41,7 +42,30 @@ def apply_look(obj) -> dict:
     return material.build_lic_material(lic_material(obj), grid_names(obj), look_of(obj))
 
 
+#: > 0 while look settings are written together (see rebuild_suspended): their update callbacks
+#: then do not rebuild the material once per property.
+_rebuild_suspended = 0
+
+
+@contextmanager
+def rebuild_suspended():
+    """Write several look settings with plain assignment and rebuild the material once afterwards
+    (call apply_look): the update callbacks do nothing inside this block.
+
+    This replaces dict-style writes (``s["look"] = 1``), which bypassed the callbacks by writing
+    the ID-property storage directly: Blender 5.0 no longer supports that for ``bpy.props``
+    properties (docs/blender.md, "Blender versions")."""
+    global _rebuild_suspended
+    _rebuild_suspended += 1
+    try:
+        yield
+    finally:
+        _rebuild_suspended -= 1
+
+
 def _update(self, context):
+    if _rebuild_suspended:
+        return
     obj = self.id_data
     if isinstance(obj, bpy.types.Object) and obj.type == "VOLUME" and self.is_bake:
         apply_look(obj)

@@ -3,7 +3,7 @@
 #include "lic/Error.h"
 
 #include <cmath>
-#include <map>
+#include <algorithm>
 #include <sstream>
 
 namespace lic {
@@ -51,6 +51,9 @@ void LicSettings::validate() const
     if (threads < 0) fail("threads", threads, ">= 0 (0 = all cores)");
     if (coveredRun < 1) fail("covered run", coveredRun, ">= 1");
     if (maxStreamline < 0) fail("max streamline", maxStreamline, ">= 0");
+    if (brick != 0 && (brick < 8 || brick > 512 || brick % 8 != 0))
+        fail("brick", brick, "a multiple of 8 in 8..512 output voxels (0 = automatic)");
+    if (stride < 0 || stride > 64) fail("stride", stride, "0..64 samples per integration step (0 = automatic)");
 }
 
 namespace detail {
@@ -97,19 +100,11 @@ void windowSums(KernelType kernel, double decay, int n, std::size_t N, int W, co
     }
 }
 
-std::vector<FastTile> makeFastTiles(const OutputDomain& domain)
+int integrationStride(const OutputDomain& domain, const LicSettings& settings)
 {
-    constexpr int kTileLog2 = 5; // 32³ output voxels
-    std::map<openvdb::Coord, std::size_t> index;
-    std::vector<FastTile> tiles;
-    for (std::size_t b = 0; b < domain.blockCount(); ++b) {
-        const openvdb::Coord& o = domain.blockOrigin(b);
-        const openvdb::Coord key(o[0] >> kTileLog2, o[1] >> kTileLog2, o[2] >> kTileLog2);
-        auto [it, inserted] = index.try_emplace(key, tiles.size());
-        if (inserted) tiles.emplace_back();
-        tiles[it->second].blocks.push_back(std::uint32_t(b));
-    }
-    return tiles;
+    if (settings.stride > 0) return settings.stride;
+    // About one field voxel per RK4 step (the trilinear field has no detail finer than that).
+    return std::clamp(int(std::floor(double(domain.upsample()) / settings.step + 1e-9)), 1, 8);
 }
 
 } // namespace detail

@@ -4,6 +4,7 @@
 
 #include <openvdb/tree/LeafManager.h>
 
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <sstream>
@@ -112,10 +113,16 @@ VelocityField::VelocityField(openvdb::Vec3SGrid::ConstPtr grid)
     mDim = {size_t(dim[0]), size_t(dim[1]), size_t(dim[2])};
     mLo = mBBox.min().asVec3d() - openvdb::Vec3d(0.5);
     mHi = mBBox.max().asVec3d() + openvdb::Vec3d(0.5);
-    mDense = std::make_unique<openvdb::tools::Dense<openvdb::Vec3s, openvdb::tools::LayoutZYX>>(
-        mBBox, openvdb::Vec3s(0.0f));
-    openvdb::tools::copyToDense(*mGrid, *mDense);
-    mData = mDense->data();
+    {
+        openvdb::tools::Dense<openvdb::Vec3s, openvdb::tools::LayoutZYX> dense(mBBox, openvdb::Vec3s(0.0f));
+        openvdb::tools::copyToDense(*mGrid, dense);
+        mDense.resize(dense.valueCount());
+        const openvdb::Vec3s* src = dense.data();
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mDense.size()), [&](const auto& r) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) mDense[i] = Float4{src[i][0], src[i][1], src[i][2], 0.0f};
+        });
+    }
+    mData = mDense.data();
 }
 
 openvdb::BBoxd VelocityField::worldBBox() const

@@ -1,5 +1,6 @@
 #include "lic/Noise.h"
 
+#include "lic/Engine.h"
 #include "lic/Error.h"
 
 #include <tbb/parallel_for.h>
@@ -14,9 +15,16 @@ NoiseFilter noiseFilterFromString(const std::string& s)
 }
 
 NoiseTexture::NoiseTexture(std::uint64_t seed, const openvdb::CoordBBox& box, NoiseFilter filter)
-    : mSeed(seed)
-    , mFilter(filter)
+    : NoiseTexture()
 {
+    assign(seed, box, filter, true);
+}
+
+void NoiseTexture::assign(std::uint64_t seed, const openvdb::CoordBBox& box, NoiseFilter filter, bool parallel)
+{
+    mSeed = seed;
+    mFilter = filter;
+    mBox = box;
     // One voxel of margin for trilinear lookups past the box edge.
     mLo = box.min() - openvdb::Coord(1);
     const openvdb::Coord hi = box.max() + openvdb::Coord(1);
@@ -25,9 +33,13 @@ NoiseTexture::NoiseTexture(std::uint64_t seed, const openvdb::CoordBBox& box, No
     for (int a = 0; a < 3; ++a) mBricks[a] = (mDim[a] + 7) / 8;
     mData.assign(std::size_t(mBricks[0]) * mBricks[1] * mBricks[2] * 512, 0.0f);
     auto index = [&](std::size_t i, std::size_t j, std::size_t k) { return offset(int(i), int(j), int(k)); };
+    auto forEach = [parallel](std::size_t n, const auto& fn) {
+        if (parallel) tbb::parallel_for(std::size_t(0), n, fn);
+        else for (std::size_t i = 0; i < n; ++i) fn(i);
+    };
 
     if (filter == NoiseFilter::None) {
-        tbb::parallel_for(std::size_t(0), nx, [&](std::size_t i) {
+        forEach(nx, [&](std::size_t i) {
             for (std::size_t j = 0; j < ny; ++j)
                 for (std::size_t k = 0; k < nz; ++k)
                     mData[index(i, j, k)] = whiteNoise(seed, mLo[0] + int(i), mLo[1] + int(j), mLo[2] + int(k));
@@ -36,34 +48,48 @@ NoiseTexture::NoiseTexture(std::uint64_t seed, const openvdb::CoordBBox& box, No
     }
     // Separable [¼ ½ ¼]: raw noise on the box grown by one more voxel, then one pass per axis.
     const std::size_t rx = nx + 2, ry = ny + 2, rz = nz + 2;
-    std::vector<float> raw(rx * ry * rz), pass(rx * ry * rz);
+    std::vector<float>& raw = mRaw;
+    std::vector<float>& pass = mPass;
+    raw.resize(rx * ry * rz);
+    pass.resize(rx * ry * rz);
     auto rindex = [&](std::size_t i, std::size_t j, std::size_t k) { return (i * ry + j) * rz + k; };
-    tbb::parallel_for(std::size_t(0), rx, [&](std::size_t i) {
+    forEach(rx, [&](std::size_t i) {
         for (std::size_t j = 0; j < ry; ++j)
             for (std::size_t k = 0; k < rz; ++k)
                 raw[rindex(i, j, k)] =
                     whiteNoise(seed, mLo[0] - 1 + int(i), mLo[1] - 1 + int(j), mLo[2] - 1 + int(k));
     });
     // z pass (raw → pass), y pass (pass → raw), x pass (raw → mData); edges use what exists.
-    tbb::parallel_for(std::size_t(0), rx, [&](std::size_t i) {
+    forEach(rx, [&](std::size_t i) {
         for (std::size_t j = 0; j < ry; ++j)
             for (std::size_t k = 1; k + 1 < rz; ++k)
                 pass[rindex(i, j, k)] = 0.25f * raw[rindex(i, j, k - 1)] + 0.5f * raw[rindex(i, j, k)] +
                                         0.25f * raw[rindex(i, j, k + 1)];
     });
-    tbb::parallel_for(std::size_t(0), rx, [&](std::size_t i) {
+    forEach(rx, [&](std::size_t i) {
         for (std::size_t j = 1; j + 1 < ry; ++j)
             for (std::size_t k = 1; k + 1 < rz; ++k)
                 raw[rindex(i, j, k)] = 0.25f * pass[rindex(i, j - 1, k)] + 0.5f * pass[rindex(i, j, k)] +
                                        0.25f * pass[rindex(i, j + 1, k)];
     });
-    tbb::parallel_for(std::size_t(0), nx, [&](std::size_t i) {
+    forEach(nx, [&](std::size_t i) {
         for (std::size_t j = 0; j < ny; ++j)
             for (std::size_t k = 0; k < nz; ++k)
                 mData[index(i, j, k)] = 0.25f * raw[rindex(i, j + 1, k + 1)] +
                                         0.5f * raw[rindex(i + 1, j + 1, k + 1)] +
                                         0.25f * raw[rindex(i + 2, j + 1, k + 1)];
     });
+    if (parallel) { // one texture for a whole volume: no second brick will reuse the scratch
+        std::vector<float>().swap(mRaw);
+        std::vector<float>().swap(mPass);
+    }
+}
+
+LicStats convolveNoiseBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
+                             NoiseBrickSource& noise, const LicSettings& settings, Progress& progress,
+                             const std::function<void(const BrickChannels&)>& sink)
+{
+    return convolveBricks(field, domain, layout, noise, settings, progress, sink);
 }
 
 } // namespace lic

@@ -329,4 +329,27 @@ LicResult convolveSpots(const VelocityField& field, const OutputDomain& domain, 
     }
 }
 
+LicStats convolveSpotBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
+                            const SpotSet& spots, const std::vector<double>& radii, double haloScale,
+                            const LicSettings& settings, Progress& progress, const BrickSink& sink)
+{
+    auto run = [&]<int K>() {
+        std::array<double, K> r{};
+        std::copy(radii.begin(), radii.end(), r.begin());
+        const SpotTexture<K> texture(spots, r, haloScale);
+        return convolveBricks(
+            field, domain, layout, [&](const Brick&) -> const SpotTexture<K>& { return texture; }, settings, progress,
+            sink);
+    };
+    switch (radii.size()) {
+    case 1: return run.template operator()<1>();
+    case 2: return run.template operator()<2>();
+    case 3: return run.template operator()<3>();
+    case 4: return run.template operator()<4>();
+    default:
+        throw InputError("input.radii has " + std::to_string(radii.size()) +
+                         " radii; between 1 and 4 width levels are supported");
+    }
+}
+
 } // namespace lic

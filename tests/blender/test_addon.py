@@ -1,9 +1,7 @@
 """The add-on as a package: registration, preferences, the import menu, the zip, the manifest."""
 
 import os
-import subprocess
 import tomllib
-import zipfile
 
 import addon_utils
 import bpy
@@ -50,15 +48,6 @@ def test_bl_info_and_extension_manifest():
     assert m["id"] == "licvdb" and m["type"] == "add-on"
     assert m["blender_version_min"] == "4.2.0"
     assert tuple(int(v) for v in m["version"].split(".")) == licvdb.bl_info["version"]
-
-
-def test_package_addon_zip(tmp_path):
-    out = tmp_path / "addon.zip"
-    subprocess.run([os.path.join(ROOT, "scripts", "package-addon"), str(out)], check=True,
-                   capture_output=True)
-    names = zipfile.ZipFile(out).namelist()
-    assert "licvdb/__init__.py" in names and "licvdb/blender_manifest.toml" in names
-    assert not [n for n in names if "__pycache__" in n or n.endswith(".pyc")]
 
 
 def test_sequence_and_manifest_helpers(tmp_path):

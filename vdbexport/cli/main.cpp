@@ -195,6 +195,8 @@ int main(int argc, char** argv)
     auto* oIntegrator = bake->add_option("--integrator", cli.lic.integrator, "rk4|rk45 [rk4]");
     auto* oTolerance = bake->add_option("--tolerance", cli.lic.tolerance, "rk45 local error, output voxels [1e-3]");
     auto* oMinHits = bake->add_option("--min-hits", cli.lic.minHits, "fast: deposits a voxel needs before it stops seeding [2]");
+    auto* oBrick = bake->add_option("--brick", cli.lic.brick,
+                                    "Brick edge, output voxels: a multiple of 8 in 8..512, or 0 = automatic [0]");
     auto* oUpsample = bake->add_option("--upsample", cli.output.upsample, "Output voxels per field voxel [2]");
     auto* oSeed = bake->add_option("--seed", cli.input.seed, "Hash seed of the noise and of the spot positions [1]");
     auto* oContrast = bake->add_option("--contrast", cli.output.contrast, "stretch|none [stretch]");
@@ -435,6 +437,7 @@ int main(int argc, char** argv)
             if (oTolerance->count()) r.lic.tolerance = cli.lic.tolerance;
             if (oUpsample->count()) r.output.upsample = cli.output.upsample;
             if (oMinHits->count()) r.lic.minHits = cli.lic.minHits;
+            if (oBrick->count()) r.lic.brick = cli.lic.brick;
             if (oSeed->count()) r.input.seed = cli.input.seed;
             if (oContrast->count()) r.output.contrast = cli.output.contrast;
             if (oFrames->count()) r.animation.frames = cli.animation.frames;

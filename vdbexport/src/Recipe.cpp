@@ -147,7 +147,7 @@ template <> struct Schema<LicSpec>
         return std::make_tuple(field("engine", &LicSpec::engine), field("kernel", &LicSpec::kernel),
             field("length", &LicSpec::length), field("step", &LicSpec::step), field("decay", &LicSpec::decay),
             field("integrator", &LicSpec::integrator), field("tolerance", &LicSpec::tolerance),
-            field("min_hits", &LicSpec::minHits));
+            field("min_hits", &LicSpec::minHits), field("brick", &LicSpec::brick));
     }
 };
 template <> struct Schema<WidthSpec>
@@ -537,6 +537,8 @@ void Recipe::validate() const
     checkChoice("lic.integrator", lic.integrator);
     checkPositive("lic.tolerance", lic.tolerance);
     checkInt("lic.min_hits", lic.minHits, 1, 64);
+    if (lic.brick != 0 && (lic.brick < 8 || lic.brick > 512 || lic.brick % 8 != 0))
+        violation("lic.brick", "0 (automatic) or a multiple of 8 in 8..512", std::to_string(lic.brick));
 
     if (width) {
         checkScalar("width.scalar", width->scalar);

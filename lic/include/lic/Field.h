@@ -99,16 +99,40 @@ public:
         return mStaggered ? sampleStaggered(idx) : sampleCentred(idx);
     }
 
+    /// Flow direction in INDEX space: for an index position inside the domain, `d` = W·v/|v|·sign,
+    /// W the linear part of world→index, |v| the world speed; i.e. the index-space displacement
+    /// per unit of world arc length. False (d untouched) outside the domain or where |v| ≤
+    /// minSpeed or is not finite. An index-space trace with these directions is the world-space
+    /// trace mapped through the (affine) transform, without a transform per lookup.
+    [[gnu::always_inline]] bool directionIndex(const openvdb::Vec3d& idx, double sign, double minSpeed,
+                                               openvdb::Vec3d& d) const
+    {
+        if (!containsIndex(idx)) return false;
+        const openvdb::Vec3d v = mStaggered ? sampleStaggered(idx) : sampleCentred(idx);
+        const double len2 = v.lengthSqr();
+        if (!(len2 > minSpeed * minSpeed) || !std::isfinite(len2)) return false;
+        const double s = sign / std::sqrt(len2);
+        const openvdb::Mat4d& m = mMap.worldToIndex; // row-vector layout: d_j = Σ_i v_i m[i][j]
+        d = openvdb::Vec3d((v[0] * m[0][0] + v[1] * m[1][0] + v[2] * m[2][0]) * s,
+                           (v[0] * m[0][1] + v[1] * m[1][1] + v[2] * m[2][1]) * s,
+                           (v[0] * m[0][2] + v[1] * m[1][2] + v[2] * m[2][2]) * s);
+        return true;
+    }
+
 private:
-    openvdb::Vec3d sampleCentred(const openvdb::Vec3d& idx) const;
+    [[gnu::always_inline]] openvdb::Vec3d sampleCentred(const openvdb::Vec3d& idx) const;
     openvdb::Vec3d sampleStaggered(const openvdb::Vec3d& idx) const;
+    /// Four floats (x, y, z, 0): one padded voxel, so the trilinear interpolation runs four lanes
+    /// at a time.
+    typedef float Float4 __attribute__((vector_size(16)));
     /// Value at integer coordinate, clamped to the bounding box.
-    const openvdb::Vec3s& at(int i, int j, int k) const
+    openvdb::Vec3s at(int i, int j, int k) const
     {
         i = std::clamp(i, mBBox.min()[0], mBBox.max()[0]) - mBBox.min()[0];
         j = std::clamp(j, mBBox.min()[1], mBBox.max()[1]) - mBBox.min()[1];
         k = std::clamp(k, mBBox.min()[2], mBBox.max()[2]) - mBBox.min()[2];
-        return mData[(size_t(i) * mDim[1] + size_t(j)) * mDim[2] + size_t(k)];
+        const Float4& v = mData[(size_t(i) * mDim[1] + size_t(j)) * mDim[2] + size_t(k)];
+        return openvdb::Vec3s(v[0], v[1], v[2]);
     }
 
     openvdb::Vec3SGrid::ConstPtr mGrid;
@@ -118,27 +142,35 @@ private:
     openvdb::CoordBBox mBBox;
     openvdb::Vec3d mLo, mHi;
     std::array<size_t, 3> mDim{};
-    // Dense copy of the active bbox (z fastest): the sampling fast path, ~5x faster than
-    // a ValueAccessor + BoxSampler in the integrator loop.
-    std::unique_ptr<openvdb::tools::Dense<openvdb::Vec3s, openvdb::tools::LayoutZYX>> mDense;
-    const openvdb::Vec3s* mData = nullptr;
+    // Dense copy of the active bbox (z fastest, padded to four floats): the sampling fast path,
+    // ~5x faster than a ValueAccessor + BoxSampler in the integrator loop.
+    std::vector<Float4> mDense;
+    const Float4* mData = nullptr;
     double mMaxSpeed = 0;
     openvdb::Index64 mActiveVoxels = 0;
 };
 
-inline openvdb::Vec3d VelocityField::sampleCentred(const openvdb::Vec3d& idx) const
+[[gnu::always_inline]] inline openvdb::Vec3d VelocityField::sampleCentred(const openvdb::Vec3d& idx) const
 {
     const double x = std::floor(idx[0]), y = std::floor(idx[1]), z = std::floor(idx[2]);
     const double fx = idx[0] - x, fy = idx[1] - y, fz = idx[2] - z;
-    const int i = int(x), j = int(y), k = int(z);
-    const openvdb::Vec3d c000 = at(i, j, k), c001 = at(i, j, k + 1), c010 = at(i, j + 1, k),
-                         c011 = at(i, j + 1, k + 1), c100 = at(i + 1, j, k),
-                         c101 = at(i + 1, j, k + 1), c110 = at(i + 1, j + 1, k),
-                         c111 = at(i + 1, j + 1, k + 1);
-    const openvdb::Vec3d c00 = c000 + (c001 - c000) * fz, c01 = c010 + (c011 - c010) * fz,
-                         c10 = c100 + (c101 - c100) * fz, c11 = c110 + (c111 - c110) * fz;
-    const openvdb::Vec3d c0 = c00 + (c01 - c00) * fy, c1 = c10 + (c11 - c10) * fy;
-    return c0 + (c1 - c0) * fx;
+    // Clamp each axis' two lattice indices once (as at() would per corner), then address the
+    // eight corners by sums of per-axis offsets.
+    const int i = int(x) - mBBox.min()[0], j = int(y) - mBBox.min()[1], k = int(z) - mBBox.min()[2];
+    const int nx = int(mDim[0]) - 1, ny = int(mDim[1]) - 1, nz = int(mDim[2]) - 1;
+    const std::size_t sx = mDim[1] * mDim[2], sy = mDim[2];
+    const std::size_t x0 = std::size_t(std::clamp(i, 0, nx)) * sx, x1 = std::size_t(std::clamp(i + 1, 0, nx)) * sx;
+    const std::size_t y0 = std::size_t(std::clamp(j, 0, ny)) * sy, y1 = std::size_t(std::clamp(j + 1, 0, ny)) * sy;
+    const std::size_t z0 = std::size_t(std::clamp(k, 0, nz)), z1 = std::size_t(std::clamp(k + 1, 0, nz));
+    const Float4* d = mData;
+    const float tx = float(fx), ty = float(fy), tz = float(fz);
+    const Float4 c00 = d[x0 + y0 + z0] + (d[x0 + y0 + z1] - d[x0 + y0 + z0]) * tz;
+    const Float4 c01 = d[x0 + y1 + z0] + (d[x0 + y1 + z1] - d[x0 + y1 + z0]) * tz;
+    const Float4 c10 = d[x1 + y0 + z0] + (d[x1 + y0 + z1] - d[x1 + y0 + z0]) * tz;
+    const Float4 c11 = d[x1 + y1 + z0] + (d[x1 + y1 + z1] - d[x1 + y1 + z0]) * tz;
+    const Float4 c0 = c00 + (c01 - c00) * ty, c1 = c10 + (c11 - c10) * ty;
+    const Float4 v = c0 + (c1 - c0) * tx;
+    return openvdb::Vec3d(v[0], v[1], v[2]);
 }
 
 } // namespace lic

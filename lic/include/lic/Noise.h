@@ -2,8 +2,13 @@
 // (seed, voxel), so any part of the volume can be regenerated independently of the rest.
 #pragma once
 
+#include "lic/Bricks.h"
+
 #include <openvdb/openvdb.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+
+#include <functional>
 
 #include <algorithm>
 #include <cmath>
@@ -57,6 +62,15 @@ public:
     /// @param box output voxels to precompute (inclusive); ~4 bytes per voxel of box + margin.
     NoiseTexture(std::uint64_t seed, const openvdb::CoordBBox& box,
                  NoiseFilter filter = NoiseFilter::Binomial);
+    /// An empty texture, to be filled by assign().
+    NoiseTexture() : mSeed(0), mFilter(NoiseFilter::Binomial), mLo(0), mDim{0, 0, 0}, mBricks{0, 0, 0} {}
+
+    /// Recompute for another box, reusing the storage. `parallel` = false for a caller that is
+    /// itself one task of a parallel loop (a brick).
+    void assign(std::uint64_t seed, const openvdb::CoordBBox& box, NoiseFilter filter, bool parallel = true);
+    /// The box the values were computed for (the constructor's box).
+    const openvdb::CoordBBox& box() const { return mBox; }
+    bool built() const { return !mData.empty(); }
 
     std::uint64_t seed() const { return mSeed; }
     NoiseFilter filter() const { return mFilter; }
@@ -67,28 +81,32 @@ public:
     /// Multiply every stored voxel value by weight(voxel) (a region-of-interest pre-mask), in
     /// parallel; `weight` must be thread-safe and deterministic.
     template<typename F>
-    void multiply(const F& weight)
+    void multiply(const F& weight, bool parallel = true)
     {
-        tbb::parallel_for(0, mDim[0], [&](int i) {
+        auto slab = [&](int i) {
             for (int j = 0; j < mDim[1]; ++j)
                 for (int k = 0; k < mDim[2]; ++k)
                     mData[offset(i, j, k)] *= float(weight(mLo + openvdb::Coord(i, j, k)));
-        });
+        };
+        if (parallel) tbb::parallel_for(0, mDim[0], slab);
+        else for (int i = 0; i < mDim[0]; ++i) slab(i);
     }
 
     /// Trilinear value at a continuous output-index position.
     void sample(const openvdb::Vec3d& p, float* out) const { sampleGradient(p, out, nullptr); }
 
     /// Trilinear value and, if `grad` is non-null, its gradient (d/di, d/dj, d/dk).
-    void sampleGradient(const openvdb::Vec3d& p, float* out, float* grad) const
+    [[gnu::always_inline]] void sampleGradient(const openvdb::Vec3d& p, float* out, float* grad) const
     {
         const double fx0 = std::floor(p[0]), fy0 = std::floor(p[1]), fz0 = std::floor(p[2]);
-        const int i = int(fx0), j = int(fy0), k = int(fz0);
+        const int i = int(fx0) - mLo[0], j = int(fy0) - mLo[1], k = int(fz0) - mLo[2];
         const float fx = float(p[0] - fx0), fy = float(p[1] - fy0), fz = float(p[2] - fz0);
-        float n[2][2][2];
-        for (int a = 0; a < 2; ++a)
-            for (int b = 0; b < 2; ++b)
-                for (int c = 0; c < 2; ++c) n[a][b][c] = at(i + a, j + b, k + c);
+        // The bricked offset is a sum of per-axis terms, so the eight corners cost six clamps.
+        const std::size_t X0 = axisX(i), X1 = axisX(i + 1), Y0 = axisY(j), Y1 = axisY(j + 1);
+        const std::size_t Z0 = axisZ(k), Z1 = axisZ(k + 1);
+        const float* d = mData.data();
+        float n[2][2][2] = {{{d[X0 + Y0 + Z0], d[X0 + Y0 + Z1]}, {d[X0 + Y1 + Z0], d[X0 + Y1 + Z1]}},
+                            {{d[X1 + Y0 + Z0], d[X1 + Y0 + Z1]}, {d[X1 + Y1 + Z0], d[X1 + Y1 + Z1]}}};
         auto lerp = [](float u, float v, float t) { return u + (v - u) * t; };
         const float c00 = lerp(n[0][0][0], n[0][0][1], fz), c01 = lerp(n[0][1][0], n[0][1][1], fz);
         const float c10 = lerp(n[1][0][0], n[1][0][1], fz), c11 = lerp(n[1][1][0], n[1][1][1], fz);
@@ -111,6 +129,22 @@ private:
         k = std::clamp(k - mLo[2], 0, mDim[2] - 1);
         return mData[offset(i, j, k)];
     }
+    // Per-axis parts of offset() for box-relative indices, clamped to the box.
+    std::size_t axisX(int i) const
+    {
+        i = std::clamp(i, 0, mDim[0] - 1);
+        return std::size_t(i >> 3) * std::size_t(mBricks[1]) * std::size_t(mBricks[2]) * 512 + std::size_t((i & 7) << 6);
+    }
+    std::size_t axisY(int j) const
+    {
+        j = std::clamp(j, 0, mDim[1] - 1);
+        return std::size_t(j >> 3) * std::size_t(mBricks[2]) * 512 + std::size_t((j & 7) << 3);
+    }
+    std::size_t axisZ(int k) const
+    {
+        k = std::clamp(k, 0, mDim[2] - 1);
+        return std::size_t(k >> 3) * 512 + std::size_t(k & 7);
+    }
     /// Storage is in 8³ bricks so the 8 corners of a lookup usually share a brick (cache lines).
     std::size_t offset(int i, int j, int k) const
     {
@@ -122,10 +156,46 @@ private:
 
     std::uint64_t mSeed;
     NoiseFilter mFilter;
+    openvdb::CoordBBox mBox;
     openvdb::Coord mLo;
     int mDim[3];
     int mBricks[3];
     std::vector<float> mData;
+    std::vector<float> mRaw, mPass; // filter scratch, kept for reuse
+};
+
+/// The noise of each brick and its ghost margin, made on the worker thread that convolves the
+/// brick (storage reused per thread): a bake never holds the noise of the whole volume. Values
+/// are those of one NoiseTexture over everything (they depend only on seed and voxel).
+/// Satisfies convolveBricks()' textureFor.
+class NoiseBrickSource
+{
+public:
+    /// `premask(texture)`, if given, multiplies a brick's noise by a region-of-interest weight
+    /// (serially: it runs inside a brick's task).
+    using Premask = std::function<void(NoiseTexture&)>;
+    NoiseBrickSource(std::uint64_t seed, NoiseFilter filter, int margin, Premask premask = {})
+        : mSeed(seed), mFilter(filter), mMargin(margin), mPremask(std::move(premask))
+    {
+    }
+    /// The noise over `brick.box` grown by the margin; the same brick asked for twice in a row on
+    /// one thread is made once.
+    const NoiseTexture& operator()(const Brick& brick)
+    {
+        const openvdb::CoordBBox box = brick.box.expandBy(mMargin);
+        NoiseTexture& t = mTls.local();
+        if (t.built() && t.box() == box) return t;
+        t.assign(mSeed, box, mFilter, false);
+        if (mPremask) mPremask(t);
+        return t;
+    }
+
+private:
+    std::uint64_t mSeed;
+    NoiseFilter mFilter;
+    int mMargin;
+    Premask mPremask;
+    tbb::enumerable_thread_specific<NoiseTexture> mTls;
 };
 
 /// A constant texture (every channel = `value`): LIC of it must return `value` everywhere.
@@ -144,5 +214,16 @@ public:
 private:
     float mValue;
 };
+
+struct LicSettings;
+struct LicStats;
+struct BrickChannels;
+class Progress;
+
+/// convolveBricks() of per-brick noise: what a bake runs (compiled once, in Noise.cpp).
+/// @throw lic::InputError for invalid settings; lic::Cancelled.
+LicStats convolveNoiseBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
+                             NoiseBrickSource& noise, const LicSettings& settings, Progress& progress,
+                             const std::function<void(const BrickChannels&)>& sink);
 
 } // namespace lic

@@ -218,4 +218,11 @@ LicResult convolveSpots(const VelocityField& field, const OutputDomain& domain, 
                         const std::vector<double>& radii, double haloScale, const LicSettings& settings,
                         Progress& progress = nullProgress());
 
+/// convolveBricks() of the K-level spot texture (K = radii.size(), 1 ≤ K ≤ 4): what a bake
+/// runs; the engines are compiled here once for every K.
+/// @throw lic::InputError for K outside [1, 4] or invalid settings; lic::Cancelled.
+LicStats convolveSpotBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
+                            const SpotSet& spots, const std::vector<double>& radii, double haloScale,
+                            const LicSettings& settings, Progress& progress, const BrickSink& sink);
+
 } // namespace lic

@@ -1,0 +1,215 @@
+"""The add-on's zips (scripts/package-addon): the 4.2+ extension zip's layout and manifest, the
+legacy zip installed and enabled in this Blender the 3.x way, and the extension loaded here the
+way Blender 4.2+ loads extensions (as the package ``bl_ext.<repository>.<id>``).
+
+Blender 3.4 has no extension installer: the extension zip's layout and manifest are checked
+against the rules of Blender 4.2's extension tooling (docs/blender.md lists them), not installed.
+"""
+
+import ast
+import os
+import re
+import subprocess
+import textwrap
+import tomllib
+import zipfile
+
+import bpy
+import pytest
+
+import licvdb
+
+from conftest import licvdb_exe
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+PKG = os.path.join(ROOT, "blender_addon", "licvdb")
+
+# Blender 4.2's manifest rules (its extension tooling, blender_ext.py, and the manual's tag list).
+TERSE_MAX = 64
+PERMISSION_KEYS = {"files", "network", "clipboard", "camera", "microphone"}
+ADDON_TAGS = {"3D View", "Add Curve", "Add Mesh", "Animation", "Bake", "Camera", "Compositing",
+              "Development", "Game Engine", "Geometry Nodes", "Grease Pencil", "Import-Export", "Lighting",
+              "Material", "Modeling", "Mesh", "Node", "Object", "Paint", "Pipeline", "Physics", "Render",
+              "Rigging", "Scene", "Sculpt", "Sequencer", "System", "Text Editor", "Tracking",
+              "User Interface", "UV"}
+SEMVER = re.compile(r"^(0|[1-9]\d*)\.(0|[1-9]\d*)\.(0|[1-9]\d*)(-[0-9A-Za-z.-]+)?(\+[0-9A-Za-z.-]+)?$")
+
+
+def terse_error(value):
+    """Blender's rule for a tagline or a permission's reason, or None if it holds."""
+    if not isinstance(value, str) or not value.strip():
+        return "a non-empty string expected"
+    if value != value.strip():
+        return "no leading/trailing white space expected"
+    if len(value) > TERSE_MAX:
+        return f"at most {TERSE_MAX} characters expected, found {len(value)}"
+    if not (value[-1].isalnum() or value[-1] in ")]}"):
+        return "must not end with punctuation"
+    return None
+
+
+def manifest_errors(m):
+    """Every way ``m`` (a decoded blender_manifest.toml) breaks the 4.2 schema (1.0.0)."""
+    errors = []
+    required = {"schema_version": str, "id": str, "version": str, "name": str, "tagline": str,
+                "maintainer": str, "type": str, "license": list, "blender_version_min": str}
+    for key, ty in required.items():
+        if key not in m:
+            errors.append(f"missing {key}")
+        elif not isinstance(m[key], ty):
+            errors.append(f"{key} must be a {ty.__name__}")
+    if errors:
+        return errors
+    if not SEMVER.match(m["schema_version"]) or not SEMVER.match(m["version"]):
+        errors.append("schema_version and version must be semantic versions")
+    pid = m["id"]
+    if not pid.isidentifier() or "__" in pid or pid.startswith("_") or pid.endswith("_"):
+        errors.append(f"id {pid!r} is not a valid extension id")
+    for key in ("name", "maintainer"):
+        if m[key] != m[key].strip() or not m[key].strip():
+            errors.append(f"{key} must be non-empty without surrounding white space")
+    if (e := terse_error(m["tagline"])) is not None:
+        errors.append(f"tagline: {e}")
+    if m["type"] not in {"add-on", "theme"}:
+        errors.append(f"type {m['type']!r}")
+    parts = m["blender_version_min"].split(".")
+    if not all(p.isdigit() for p in parts) or tuple(int(p) for p in parts) < (4, 2, 0):
+        errors.append(f"blender_version_min {m['blender_version_min']!r} must be 4.2.0 or later")
+    if not m["license"] or not all(isinstance(x, str) and x.startswith("SPDX:") for x in m["license"]):
+        errors.append("license must be a non-empty list of SPDX:… identifiers")
+    for tag in m.get("tags", []):
+        if tag not in ADDON_TAGS:
+            errors.append(f"tag {tag!r} is not one of Blender's add-on tags")
+    perms = m.get("permissions", {})
+    if not isinstance(perms, dict):
+        errors.append("permissions must be a table")
+    else:
+        for key, why in perms.items():
+            if key not in PERMISSION_KEYS:
+                errors.append(f"permission {key!r}")
+            elif (e := terse_error(why)) is not None:
+                errors.append(f"permission {key}: {e}")
+    return errors
+
+
+@pytest.fixture(scope="module")
+def zips(tmp_path_factory):
+    out = tmp_path_factory.mktemp("zips")
+    proc = subprocess.run([os.path.join(ROOT, "scripts", "package-addon"), str(out)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    ext, legacy = out / "licvdb-blender-extension.zip", out / "licvdb-blender-addon.zip"
+    assert ext.is_file() and legacy.is_file(), proc.stdout
+    return {"extension": ext, "legacy": legacy}
+
+
+def package_files():
+    return sorted(f for f in os.listdir(PKG) if f.endswith((".py", ".toml")))
+
+
+def test_extension_zip_has_the_package_at_its_root(zips):
+    names = zipfile.ZipFile(zips["extension"]).namelist()
+    assert "blender_manifest.toml" in names and "__init__.py" in names
+    assert sorted(names) == package_files(), "the package's files, flat at the zip's root, nothing else"
+    assert not [n for n in names if "__pycache__" in n or n.endswith(".pyc")]
+
+
+def test_legacy_zip_has_the_package_folder(zips):
+    names = zipfile.ZipFile(zips["legacy"]).namelist()
+    assert sorted(names) == ["licvdb/" + f for f in package_files()]
+
+
+def test_extension_manifest_is_valid(zips):
+    with zipfile.ZipFile(zips["extension"]) as z:
+        m = tomllib.loads(z.read("blender_manifest.toml").decode("utf-8"))
+    assert manifest_errors(m) == []
+    assert m["id"] == "licvdb" and m["type"] == "add-on"
+    assert tuple(int(v) for v in m["version"].split(".")) == licvdb.bl_info["version"]
+
+
+def test_manifest_checker_catches_bad_manifests():
+    """The checker above fails on what Blender 4.2 rejects (so a passing check means something)."""
+    with open(os.path.join(PKG, "blender_manifest.toml"), "rb") as f:
+        good = tomllib.load(f)
+    bad = [dict(good, tagline="Ends with a period."), dict(good, id="lic__vdb"), dict(good, type="addon"),
+           dict(good, blender_version_min="4.1.0"), dict(good, tags=["Flow"]), dict(good, license="GPL"),
+           dict(good, permissions={"files": "x" * 65}), {k: v for k, v in good.items() if k != "maintainer"}]
+    for m in bad:
+        assert manifest_errors(m), m
+
+
+def test_package_imports_are_relative():
+    """An extension is imported as bl_ext.<repository>.licvdb: the package must not import itself
+    by the name ``licvdb`` nor look its preferences up by that name."""
+    for name in package_files():
+        if not name.endswith(".py"):
+            continue
+        with open(os.path.join(PKG, name), encoding="utf-8") as f:
+            src = f.read()
+        for node in ast.walk(ast.parse(src)):
+            if isinstance(node, ast.ImportFrom):
+                assert node.level > 0 or (node.module or "").split(".")[0] != "licvdb", f"{name}: {ast.dump(node)}"
+            elif isinstance(node, ast.Import):
+                assert all(a.name.split(".")[0] != "licvdb" for a in node.names), f"{name}: {ast.dump(node)}"
+        assert not re.search(r"addons(\.get\(|\[)\s*[\"']licvdb[\"']", src), f"{name} names its own module"
+
+
+def run_blender(script, env_extra, tmp_path):
+    """Run ``script`` in a separate Blender (background, factory settings) with user scripts and
+    config in ``tmp_path``; returns its output. The add-on is *not* on sys.path there."""
+    env = {k: v for k, v in os.environ.items() if k != "LICVDB_EXECUTABLE"}
+    env.update(BLENDER_USER_SCRIPTS=str(tmp_path / "scripts"), BLENDER_USER_CONFIG=str(tmp_path / "config"),
+               **env_extra)
+    path = tmp_path / "script.py"
+    path.write_text(textwrap.dedent(script))
+    proc = subprocess.run([bpy.app.binary_path, "-b", "--factory-startup",
+                           "--python-exit-code", "1", "-P", str(path)],
+                          capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return proc.stdout
+
+
+def test_legacy_zip_installs_and_enables(zips, tmp_path):
+    """Blender 3.x's way (docs/blender.md, "Install"): Preferences > Add-ons > Install… = addon_install."""
+    out = run_blender(f"""
+        import os, addon_utils, bpy
+        assert bpy.ops.preferences.addon_install(filepath={str(zips['legacy'])!r}) == {{'FINISHED'}}
+        addon_utils.enable("licvdb", default_set=True, handle_error=None)
+        import licvdb
+        assert licvdb.__file__.startswith({str(tmp_path / 'scripts')!r}), licvdb.__file__
+        assert "licvdb" in bpy.context.preferences.addons
+        assert hasattr(bpy.ops.licvdb, "import_bake") and hasattr(bpy.types.Object, "licvdb")
+        print("LEGACY-OK", licvdb.__file__)
+    """, {}, tmp_path)
+    assert "LEGACY-OK" in out
+
+
+def test_extension_loads_as_a_bl_ext_package(zips, tmp_path, bakes):
+    """Blender 4.2+ unpacks an extension into its repository folder and imports it as
+    ``bl_ext.<repository>.<id>``. Emulated here: the extension zip unpacked as
+    bl_ext/user_default/licvdb, enabled under that module name; licvdb found on PATH (no
+    $LICVDB_EXECUTABLE, no build tree beside it); a bake imported through the operator."""
+    pkg = tmp_path / "scripts" / "addons" / "bl_ext" / "user_default"
+    zipfile.ZipFile(zips["extension"]).extractall(pkg / "licvdb")
+    for d in (pkg.parent, pkg):
+        (d / "__init__.py").write_text("")
+    bindir = tmp_path / "bin"
+    bindir.mkdir()
+    os.symlink(licvdb_exe(), bindir / "licvdb")
+    # 3.4's addon_utils.enable cannot take a dotted module name: do what 4.2's does for an
+    # extension (import bl_ext.<repository>.<id>, add the add-on entry, register).
+    out = run_blender(f"""
+        import importlib, bpy
+        name = "bl_ext.user_default.licvdb"
+        mod = importlib.import_module(name)
+        bpy.context.preferences.addons.new().module = name
+        mod.register()
+        assert name in bpy.context.preferences.addons, list(bpy.context.preferences.addons.keys())
+        assert mod.prefs._addon_prefs() is not None, "preferences not found under the extension's name"
+        path, source, tried = mod.prefs.locate_executable()
+        assert (path, source) == ({str(bindir / 'licvdb')!r}, "PATH"), (path, source, tried)
+        assert bpy.ops.licvdb.import_bake(filepath={str(bakes['still'])!r}) == {{'FINISHED'}}
+        obj = bpy.context.active_object
+        assert obj.type == "VOLUME" and obj.licvdb.is_bake and obj.active_material is not None
+        print("EXTENSION-OK", mod.__file__)
+    """, {"PATH": f"{bindir}{os.pathsep}{os.environ.get('PATH', '')}"}, tmp_path)
+    assert "EXTENSION-OK" in out

@@ -1,0 +1,230 @@
+// The streaming bake end to end (vdbexport::bake): outputs of many bricks are bit-identical for
+// 1, 2, 3 and 4 threads in every grid and every loop frame; halo ≥ density on every voxel of a
+// bake; a loop traces the same streamlines as a still; streamed percentiles are exact.
+#include "vdbexport/Bake.h"
+#include "vdbexport/VdbIO.h"
+
+#include "bake/Scalars.h"
+
+#include "lic/FieldPresets.h"
+#include "lic/Scalars.h"
+
+#include <gtest/gtest.h>
+#include <openvdb/io/File.h>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <cstring>
+#include <filesystem>
+#include <map>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+class StreamBake : public ::testing::Test
+{
+protected:
+    static void SetUpTestSuite()
+    {
+        openvdb::initialize();
+        sDir = fs::temp_directory_path() / ("licvdb_stream_" + std::to_string(::getpid()));
+        fs::create_directories(sDir);
+        const lic::PresetField f = lic::makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36));
+        openvdb::GridPtrVec grids{f.velocity};
+        for (const auto& s : f.scalars) grids.push_back(s);
+        vdbexport::writeVdbAtomic((sDir / "jet.vdb").string(), grids);
+    }
+    static void TearDownTestSuite() { fs::remove_all(sDir); }
+
+    /// Many bricks: a 48×48×72 output in 16³ bricks.
+    static vdbexport::Recipe recipe(const std::string& out)
+    {
+        vdbexport::Recipe r;
+        r.field.path = (sDir / "jet.vdb").string();
+        r.output.path = (sDir / out).string();
+        r.lic.length = 8;
+        r.lic.brick = 16;
+        return r;
+    }
+    static vdbexport::Recipe spotRecipe(const std::string& out)
+    {
+        vdbexport::Recipe r = recipe(out);
+        r.input.type = "spots";
+        r.input.spacing = 7;
+        r.input.radii = {1.0, 1.5, 2.0};
+        r.width = vdbexport::WidthSpec{"speed", std::nullopt, true};
+        r.color = vdbexport::ColorSpec{"vorticity", "heated-object", std::nullopt};
+        r.output.writeTangent = true;
+        r.output.writeSeries = true;
+        return r;
+    }
+    static inline fs::path sDir;
+};
+
+openvdb::GridPtrVec readAll(const std::string& path)
+{
+    openvdb::io::File file(path);
+    file.open();
+    openvdb::GridPtrVec grids;
+    for (auto it = file.beginName(); it != file.endName(); ++it) grids.push_back(file.readGrid(it.gridName()));
+    return grids;
+}
+
+/// Same topology and the same bits in every active voxel.
+template<typename GridT>
+bool sameGrid(const openvdb::GridBase& a, const openvdb::GridBase& b)
+{
+    const auto& ga = static_cast<const GridT&>(a);
+    const auto& gb = static_cast<const GridT&>(b);
+    if (!ga.tree().hasSameTopology(gb.tree())) return false;
+    auto acc = gb.getConstAccessor();
+    for (auto it = ga.cbeginValueOn(); it; ++it) {
+        const auto va = *it, vb = acc.getValue(it.getCoord());
+        if (std::memcmp(&va, &vb, sizeof va) != 0) return false;
+    }
+    return true;
+}
+
+void expectSameFiles(const std::string& a, const std::string& b, const std::string& what)
+{
+    const openvdb::GridPtrVec ga = readAll(a), gb = readAll(b);
+    ASSERT_EQ(ga.size(), gb.size()) << what;
+    for (std::size_t i = 0; i < ga.size(); ++i) {
+        ASSERT_EQ(ga[i]->getName(), gb[i]->getName()) << what;
+        const bool same = ga[i]->isType<openvdb::FloatGrid>() ? sameGrid<openvdb::FloatGrid>(*ga[i], *gb[i])
+                                                              : sameGrid<openvdb::Vec3SGrid>(*ga[i], *gb[i]);
+        EXPECT_TRUE(same) << what << ": grid " << ga[i]->getName() << " differs";
+    }
+}
+
+/// Voxels where halo < density (there must be none), and the density voxels checked.
+std::pair<std::size_t, std::size_t> haloBelowDensity(const std::string& path)
+{
+    openvdb::FloatGrid::Ptr density, halo;
+    for (const auto& g : readAll(path)) {
+        if (g->getName() == "density") density = openvdb::gridPtrCast<openvdb::FloatGrid>(g);
+        if (g->getName() == "halo") halo = openvdb::gridPtrCast<openvdb::FloatGrid>(g);
+    }
+    EXPECT_TRUE(density && halo) << path;
+    if (!density || !halo) return {1, 0};
+    std::size_t below = 0, n = 0;
+    auto acc = halo->getConstAccessor();
+    for (auto it = density->cbeginValueOn(); it; ++it, ++n)
+        if (acc.getValue(it.getCoord()) < *it) ++below;
+    return {below, n};
+}
+
+} // namespace
+
+TEST_F(StreamBake, EveryGridIsBitIdenticalForOneToFourThreads)
+{
+    const tbb::global_control allow(tbb::global_control::max_allowed_parallelism, 4);
+    // Spots with halos, three widths by speed, colour, tangent and the width series.
+    std::string first;
+    for (int threads : {1, 2, 3, 4}) {
+        auto r = spotRecipe("spots_t" + std::to_string(threads) + ".vdb");
+        r.threads = threads;
+        const auto summary = vdbexport::bake(r);
+        EXPECT_GE(summary["bricks"].get<int>(), 30);
+        if (threads == 1) first = r.output.path;
+        else expectSameFiles(first, r.output.path, "spots, " + std::to_string(threads) + " threads");
+    }
+    // A noise loop of 4 frames with colour and tangent: every frame file, and the contrast
+    // statistics to the last bit (sums merged in a fixed order, not as bricks arrive).
+    std::string loop1;
+    nlohmann::json stats1;
+    for (int threads : {1, 3, 4}) {
+        auto r = recipe("loop_t" + std::to_string(threads) + ".vdb");
+        r.animation.frames = 4;
+        r.color = vdbexport::ColorSpec{"speed", "viridis", std::nullopt};
+        r.output.writeTangent = true;
+        r.threads = threads;
+        const auto summary = vdbexport::bake(r);
+        ASSERT_EQ(summary["files"].size(), 4u);
+        const nlohmann::json stats = {summary["raw_mean"], summary["raw_stddev"]};
+        if (threads == 1) {
+            loop1 = r.output.path;
+            stats1 = stats;
+            continue;
+        }
+        EXPECT_EQ(stats.dump(), stats1.dump()) << threads << " threads";
+        for (int f = 1; f <= 4; ++f)
+            expectSameFiles(vdbexport::framePath(loop1, f, 4), vdbexport::framePath(r.output.path, f, 4),
+                            "noise loop frame " + std::to_string(f));
+    }
+    // A spot loop: frames of line and halo.
+    std::string spotLoop1;
+    for (int threads : {1, 4}) {
+        auto r = spotRecipe("spotloop_t" + std::to_string(threads) + ".vdb");
+        r.animation.frames = 3;
+        r.threads = threads;
+        vdbexport::bake(r);
+        if (threads == 1) {
+            spotLoop1 = r.output.path;
+            continue;
+        }
+        for (int f = 1; f <= 3; ++f)
+            expectSameFiles(vdbexport::framePath(spotLoop1, f, 3), vdbexport::framePath(r.output.path, f, 3),
+                            "spot loop frame " + std::to_string(f));
+    }
+}
+
+TEST_F(StreamBake, HaloIsNeverBelowDensityInAnyVoxelOfABake)
+{
+    auto still = spotRecipe("halo_still.vdb");
+    vdbexport::bake(still);
+    const auto [below, n] = haloBelowDensity(still.output.path);
+    EXPECT_GT(n, 10000u);
+    EXPECT_EQ(below, 0u);
+    auto post = spotRecipe("halo_post.vdb");
+    post.roi = vdbexport::RoiSpec{"speed", {0.2, 2.0}, "post"};
+    vdbexport::bake(post);
+    EXPECT_EQ(haloBelowDensity(post.output.path).first, 0u);
+    auto loop = spotRecipe("halo_loop.vdb");
+    loop.animation.frames = 3;
+    vdbexport::bake(loop);
+    for (int f = 1; f <= 3; ++f) EXPECT_EQ(haloBelowDensity(vdbexport::framePath(loop.output.path, f, 3)).first, 0u);
+}
+
+TEST_F(StreamBake, ALoopTracesTheSameStreamlinesAsAStill)
+{
+    auto still = recipe("trace_still.vdb");
+    const auto a = vdbexport::bake(still);
+    auto loop = recipe("trace_loop.vdb");
+    loop.animation.frames = 24;
+    const auto b = vdbexport::bake(loop);
+    EXPECT_EQ(b["files"].size(), 24u);
+    EXPECT_EQ(a["streamlines"], b["streamlines"]);
+    EXPECT_EQ(a["samples"], b["samples"]);
+    EXPECT_EQ(a["deposits"], b["deposits"]);
+    EXPECT_GT(a["streamlines"].get<std::uint64_t>(), 1000u);
+}
+
+TEST_F(StreamBake, StreamedPercentilesAreExact)
+{
+    const lic::PresetField f = lic::makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36));
+    const lic::VelocityField field(f.velocity);
+    const lic::OutputDomain domain(field, 2);
+    for (const std::string name : {"speed", "vorticity"}) {
+        const openvdb::FloatGrid::Ptr s = lic::deriveScalar(*f.velocity, name);
+        std::vector<float> v;
+        vdbexport::pipeline::ScalarProbe probe(*s);
+        for (std::size_t b = 0; b < domain.blockCount(); ++b) {
+            const auto& mask = domain.blockMask(b);
+            for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off))
+                v.push_back(probe.at(domain.worldOf(domain.coordOf(b * lic::OutputDomain::kBlockVoxels + off))));
+        }
+        auto pct = [&](double q) {
+            const std::size_t k = std::min(v.size() - 1, std::size_t(q * double(v.size() - 1) + 0.5));
+            std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(k), v.end());
+            return double(v[k]);
+        };
+        const std::array<double, 2> expected{pct(0.01), pct(0.99)};
+        for (int threads : {1, 2}) {
+            const auto got = vdbexport::pipeline::autoRange(*s, domain, threads);
+            EXPECT_EQ(got[0], expected[0]) << name;
+            EXPECT_EQ(got[1], expected[1]) << name;
+        }
+    }
+}

@@ -1,0 +1,79 @@
+#include "Input.h"
+
+#include "lic/Bricks.h"
+#include "lic/Error.h"
+#include "lic/Region.h"
+
+#include <optional>
+
+namespace vdbexport::pipeline {
+
+namespace {
+
+/// The spot centres of a bake (output index space) and their intensities: placed by the
+/// distribution over the output box, or evenly on the ridge surface of `surface`; only spots on
+/// active output voxels are kept; with a pre-mode ROI each spot is weighted by the mask at its
+/// centre and spots outside the region are dropped.
+lic::SpotSet makeSpotSet(const Recipe& r, const lic::OutputDomain& domain, const openvdb::FloatGrid* roiPre,
+                         const openvdb::FloatGrid* surface)
+{
+    std::vector<openvdb::Vec3d> centers;
+    if (surface) {
+        std::vector<openvdb::Vec3d> candidates = lic::ridgePoints(*surface, r.input.surface->threshold);
+        for (auto& c : candidates) c = domain.map().toIndex(c);
+        if (candidates.empty()) {
+            throw lic::InputError("input.surface: the scalar '" + r.input.surface->scalar +
+                                  "' has no ridge above threshold " + std::to_string(r.input.surface->threshold) +
+                                  "; lower the threshold (see `licvdb info` for the field's grids)");
+        }
+        centers = lic::selectEvenly(candidates, lic::kPoissonRadius * r.input.spacing, r.input.seed);
+    } else {
+        const openvdb::CoordBBox ib = domain.indexBBox();
+        const openvdb::BBoxd box(ib.min().asVec3d() - openvdb::Vec3d(0.5), ib.max().asVec3d() + openvdb::Vec3d(0.5));
+        centers = lic::placeSpots({lic::spotDistributionFromString(r.input.distribution), r.input.spacing,
+                                   r.input.jitter, r.input.seed},
+                                  box);
+    }
+    std::optional<ScalarProbe> probe;
+    if (roiPre) probe.emplace(*roiPre);
+    lic::SpotSet set;
+    for (const auto& c : centers) {
+        if (domain.slotOf(lic::OutputDomain::nearestVoxel(c)) < 0) continue;
+        float w = 1.0f;
+        if (probe) w = lic::roiWeight(probe->at(domain.map().toWorld(c)), r.roi->range[0], r.roi->range[1]);
+        if (w <= 0.0f) continue;
+        set.centers.push_back(c);
+        set.weights.push_back(w);
+    }
+    return set;
+}
+
+} // namespace
+
+Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& scalars)
+{
+    const Recipe& r = plan.recipe;
+    Input in;
+    if (plan.spots) {
+        openvdb::FloatGrid::ConstPtr roi = plan.roiPre ? scalars.get(r.roi->scalar) : nullptr;
+        openvdb::FloatGrid::ConstPtr surface = r.input.surface ? scalars.get(r.input.surface->scalar) : nullptr;
+        in.spots = makeSpotSet(r, domain, roi.get(), surface.get());
+        return in;
+    }
+    lic::NoiseBrickSource::Premask premask;
+    if (plan.roiPre) {
+        // Pre-mask: the noise itself is weighted, so the region's edge runs along the flow.
+        const ScalarSource roi(scalars.get(r.roi->scalar));
+        const std::array<double, 2> range = r.roi->range;
+        premask = [roi, range, &domain](lic::NoiseTexture& t) {
+            ScalarProbe probe = roi.probe();
+            t.multiply([&](const openvdb::Coord& ijk) { return lic::roiWeight(probe.at(domain.worldOf(ijk)), range[0], range[1]); },
+                       false);
+        };
+    }
+    in.noise = std::make_unique<lic::NoiseBrickSource>(r.input.seed, lic::noiseFilterFromString(r.input.noiseFilter),
+                                                       lic::ghostMargin(plan.settings), std::move(premask));
+    return in;
+}
+
+} // namespace vdbexport::pipeline

@@ -1,0 +1,109 @@
+#include "Plan.h"
+
+#include "vdbexport/Bake.h"
+
+#include "lic/Error.h"
+#include "lic/Spots.h"
+
+#include <filesystem>
+
+namespace vdbexport::pipeline {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+void requireNotYet(bool used, const std::string& what)
+{
+    if (used) {
+        throw lic::InputError(what + " is not available in this version of licvdb yet; remove it "
+                                     "from the recipe or command line (see `licvdb help bake`)");
+    }
+}
+
+/// Refuse recipe features that later releases add, and combinations that mean nothing, rather
+/// than silently ignoring them.
+void checkSupported(const Recipe& r)
+{
+    requireNotYet(r.lic.engine == "splat", "lic.engine \"splat\"");
+    const bool spots = r.input.type == "spots";
+    if (!spots && r.width) {
+        throw lic::InputError("width needs spot input (input.type \"spots\", --input spots): line width "
+                              "comes from the spot radii input.radii");
+    }
+    if (!spots && r.output.writeSeries) {
+        throw lic::InputError("output.write_series (--write-series) needs spot input (input.type \"spots\")");
+    }
+    if (!spots && r.input.surface) {
+        throw lic::InputError("input.surface places spots: it needs input.type \"spots\" (--input spots)");
+    }
+    if (spots && r.input.radii.size() > 4) {
+        throw lic::InputError("input.radii has " + std::to_string(r.input.radii.size()) +
+                              " radii; at most 4 width levels are supported");
+    }
+    if (spots && r.input.radii.size() > 1 && !r.width && !r.output.writeSeries) {
+        throw lic::InputError("input.radii has " + std::to_string(r.input.radii.size()) +
+                              " radii but nothing uses the wider levels: add a width scalar (width.scalar, "
+                              "--width SCALAR) or output.write_series (--write-series), or give one radius");
+    }
+}
+
+void checkOutputDirectory(const std::string& out)
+{
+    fs::path dir = fs::path(out).parent_path();
+    if (dir.empty()) dir = ".";
+    std::error_code ec;
+    if (!fs::is_directory(dir, ec)) {
+        throw lic::InputError("output directory \"" + dir.string() + "\" does not exist (for --out " + out + ")");
+    }
+    if (fs::is_directory(out, ec)) {
+        throw lic::InputError("output path \"" + out + "\" is a directory; expected a .vdb file name");
+    }
+}
+
+} // namespace
+
+Plan makePlan(const Recipe& recipe)
+{
+    recipe.validate();
+    recipe.validatePaths();
+    checkSupported(recipe);
+    checkOutputDirectory(recipe.output.path);
+    checkNotOverwritten(recipe, recipe.field.path, "the input field");
+
+    Plan p{recipe, {}, 1, false, false, false, true, 1, 1, 1, {}, {}};
+    lic::LicSettings& s = p.settings;
+    s.engine = lic::engineFromString(recipe.lic.engine);
+    s.integrator = lic::integratorFromString(recipe.lic.integrator);
+    s.kernel = lic::kernelFromString(recipe.lic.kernel);
+    s.decay = recipe.lic.decay;
+    s.length = recipe.lic.length;
+    s.step = recipe.lic.step;
+    s.tolerance = recipe.lic.tolerance;
+    s.minHits = recipe.lic.minHits;
+    s.brick = recipe.lic.brick;
+    s.threads = recipe.threads;
+    p.frames = recipe.animation.frames;
+    s.ripple = p.frames > 1;
+    s.validate();
+
+    p.spots = recipe.input.type == "spots";
+    p.roiPre = recipe.roi && recipe.roi->mode == "pre";
+    p.roiPost = recipe.roi && recipe.roi->mode == "post";
+    p.stretch = recipe.output.contrast == "stretch";
+    p.levels = int(recipe.input.radii.size());
+    p.textureChannels = p.spots ? 2 * p.levels : 1;
+    p.rawChannels = s.ripple ? 3 * p.textureChannels + 2 : p.textureChannels;
+    p.linePeak.assign(std::size_t(p.levels), 1.0);
+    p.haloPeak.assign(std::size_t(p.levels), 1.0);
+    if (p.spots && p.stretch) {
+        for (int k = 0; k < p.levels; ++k) {
+            const double r = recipe.input.radii[std::size_t(k)];
+            p.linePeak[std::size_t(k)] = lic::spotPeak(s, r);
+            p.haloPeak[std::size_t(k)] = lic::spotPeak(s, r * recipe.input.haloScale);
+        }
+    }
+    return p;
+}
+
+} // namespace vdbexport::pipeline

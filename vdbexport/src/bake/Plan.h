@@ -1,0 +1,33 @@
+// Stage 1 of a bake: the plan. Everything that follows from the recipe alone (engine settings,
+// which channels and grids the bake makes), decided and validated once, before any file is read.
+#pragma once
+
+#include "vdbexport/Recipe.h"
+
+#include "lic/Engine.h"
+
+#include <vector>
+
+namespace vdbexport::pipeline {
+
+struct Plan
+{
+    const Recipe& recipe;
+    lic::LicSettings settings;
+    int frames = 1;         ///< cyclic loop frames (1 = a still)
+    bool spots = false;     ///< spot input (else noise)
+    bool roiPre = false, roiPost = false;
+    bool stretch = true;    ///< contrast stretch (noise) / peak normalisation (spots)
+    int levels = 1;         ///< spot radius levels K
+    int textureChannels = 1;///< C: 1 for noise, 2K for spots (lines, then halos)
+    int rawChannels = 1;    ///< channels a brick delivers: C, or 3C + 2 for a loop (ripple sums)
+    /// Spots: the peak a single spot gives on a straight line, per level (lines and halos), the
+    /// normalisation that maps a line's core to 1 (1 without stretch).
+    std::vector<double> linePeak, haloPeak;
+};
+
+/// Validate the recipe (values, paths, combinations, features not available yet) and plan the
+/// bake. @throw lic::InputError naming the first problem.
+Plan makePlan(const Recipe& recipe);
+
+} // namespace vdbexport::pipeline

@@ -1,0 +1,133 @@
+#include "Scalars.h"
+
+#include "lic/Parallel.h"
+#include "lic/Region.h"
+#include "lic/Scalars.h"
+
+#include <openvdb/tools/Interpolation.h>
+
+#include <tbb/combinable.h>
+#include <tbb/parallel_for.h>
+
+#include <bit>
+#include <cmath>
+#include <vector>
+
+namespace vdbexport::pipeline {
+
+openvdb::FloatGrid::ConstPtr ScalarSet::get(const std::string& name)
+{
+    const std::lock_guard lock(mMutex);
+    if (auto it = mCache.find(name); it != mCache.end()) return it->second;
+    static const std::string kGradient = "-gradient";
+    openvdb::FloatGrid::ConstPtr g;
+    if (name.size() > kGradient.size() && name.ends_with(kGradient)) {
+        const auto base = lic::resolveScalar(mVelocity, mFile, name.substr(0, name.size() - kGradient.size()));
+        g = lic::gradientMagnitude(*base, name);
+    } else {
+        g = lic::resolveScalar(mVelocity, mFile, name);
+    }
+    return mCache[name] = g;
+}
+
+ScalarProbe::ScalarProbe(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& bb)
+    : mGrid(grid)
+    , mAcc(grid.getConstAccessor())
+    , mLo(bb.min().asVec3d())
+    , mHi(bb.max().asVec3d())
+{
+}
+
+float ScalarProbe::at(const openvdb::Vec3d& world)
+{
+    openvdb::Vec3d idx = mGrid.worldToIndex(world);
+    for (int a = 0; a < 3; ++a) idx[a] = std::clamp(idx[a], mLo[a], mHi[a]);
+    float v = 0.0f;
+    openvdb::tools::BoxSampler::sample(mAcc, idx, v);
+    return v;
+}
+
+namespace {
+
+/// Order-preserving key of a float: larger floats get larger keys.
+std::uint32_t orderKey(float v)
+{
+    const std::uint32_t b = std::bit_cast<std::uint32_t>(v);
+    return (b & 0x80000000u) ? ~b : (b | 0x80000000u);
+}
+float fromKey(std::uint32_t k) { return std::bit_cast<float>((k & 0x80000000u) ? (k & 0x7fffffffu) : ~k); }
+
+using Histogram = std::vector<std::uint64_t>;
+
+/// A histogram of `bins` bins over the finite samples at every active output voxel: `add(key, h)`
+/// counts a sample's order key into h.
+template<typename Add>
+Histogram histogram(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain, int threads, std::size_t bins,
+                    Add add)
+{
+    tbb::combinable<Histogram> parts([bins] { return Histogram(bins, 0); });
+    const openvdb::CoordBBox box = scalar.evalActiveVoxelBoundingBox();
+    lic::detail::runWithThreads(threads, [&] {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, domain.blockCount()), [&](const auto& r) {
+            ScalarProbe probe(scalar, box);
+            Histogram& h = parts.local();
+            for (std::size_t b = r.begin(); b != r.end(); ++b) {
+                const auto& mask = domain.blockMask(b);
+                for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off)) {
+                    const float v = probe.at(domain.worldOf(domain.coordOf(b * lic::OutputDomain::kBlockVoxels + off)));
+                    if (std::isfinite(v)) add(orderKey(v), h);
+                }
+            }
+        });
+    });
+    Histogram all(bins, 0);
+    parts.combine_each([&](const Histogram& h) {
+        for (std::size_t i = 0; i < all.size(); ++i) all[i] += h[i]; // integer sums: any order
+    });
+    return all;
+}
+
+/// The bin holding rank `k` of `h` and the count below that bin.
+std::pair<int, std::uint64_t> binOfRank(const Histogram& h, std::uint64_t k)
+{
+    std::uint64_t below = 0;
+    for (std::size_t i = 0; i < h.size(); ++i) {
+        if (k < below + h[i]) return {int(i), below};
+        below += h[i];
+    }
+    return {int(h.size()) - 1, below};
+}
+
+} // namespace
+
+std::array<double, 2> autoRange(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain, int threads)
+{
+    constexpr std::size_t kBins = 65536;
+    const Histogram coarse =
+        histogram(scalar, domain, threads, kBins, [](std::uint32_t key, Histogram& h) { ++h[key >> 16]; });
+    std::uint64_t n = 0;
+    for (std::uint64_t c : coarse) n += c;
+    if (n == 0) return {0.0, 1.0};
+    // Rank of the q-quantile as std::nth_element would pick it: round(q · (n − 1)).
+    auto rankOf = [&](double q) { return std::min(n - 1, std::uint64_t(q * double(n - 1) + 0.5)); };
+    const std::uint64_t ranks[2] = {rankOf(0.01), rankOf(0.99)};
+    // Second pass: the low 16 bits of the keys inside each percentile's coarse bin.
+    const auto [bin0, below0] = binOfRank(coarse, ranks[0]);
+    const auto [bin1, below1] = binOfRank(coarse, ranks[1]);
+    const std::uint32_t hb[2] = {std::uint32_t(bin0), std::uint32_t(bin1)};
+    const Histogram fine = histogram(scalar, domain, threads, 2 * kBins, [&hb](std::uint32_t key, Histogram& h) {
+        for (std::size_t i = 0; i < 2; ++i)
+            if ((key >> 16) == hb[i]) ++h[i * kBins + (key & 0xffffu)];
+    });
+    const std::uint64_t below[2] = {below0, below1};
+    std::array<double, 2> out{};
+    for (std::size_t i = 0; i < 2; ++i) {
+        const Histogram part(fine.begin() + std::ptrdiff_t(i * kBins), fine.begin() + std::ptrdiff_t((i + 1) * kBins));
+        const int lo = binOfRank(part, ranks[i] - below[i]).first;
+        out[i] = double(fromKey((hb[i] << 16) | std::uint32_t(lo)));
+    }
+    if (!(out[1] > out[0])) out[1] = out[0] + 1.0; // constant scalar: everything maps to the low end
+    return out;
+}
+
+} // namespace vdbexport::pipeline
