@@ -8,6 +8,7 @@
 #include "Plan.h"
 
 #include "lic/Progress.h"
+#include "vdbexport/VdbIO.h"
 
 #include <nlohmann/json.hpp>
 
