@@ -9,10 +9,6 @@
 
 namespace lic {
 
-namespace {
-int floorDiv(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
-} // namespace
-
 BrickLayout::BrickLayout(const OutputDomain& domain, int dim)
     : mDim(dim)
 {
@@ -22,7 +18,7 @@ BrickLayout::BrickLayout(const OutputDomain& domain, int dim)
     std::map<openvdb::Coord, std::size_t> index; // brick coordinate → brick, ordered x-major
     for (std::size_t b = 0; b < domain.blockCount(); ++b) {
         const openvdb::Coord& o = domain.blockOrigin(b);
-        const openvdb::Coord key(floorDiv(o[0], dim), floorDiv(o[1], dim), floorDiv(o[2], dim));
+        const openvdb::Coord key(detail::floorDiv(o[0], dim), detail::floorDiv(o[1], dim), detail::floorDiv(o[2], dim));
         index.try_emplace(key, 0);
     }
     mBricks.resize(index.size());
@@ -30,27 +26,41 @@ BrickLayout::BrickLayout(const OutputDomain& domain, int dim)
     for (auto& [key, slot] : index) {
         slot = i;
         const openvdb::Coord lo(key[0] * dim, key[1] * dim, key[2] * dim);
+        mBricks[i].id = i;
         mBricks[i].box = openvdb::CoordBBox(lo, lo + openvdb::Coord(dim - 1));
         ++i;
     }
     for (std::size_t b = 0; b < domain.blockCount(); ++b) {
         const openvdb::Coord& o = domain.blockOrigin(b);
-        Brick& brick = mBricks[index[openvdb::Coord(floorDiv(o[0], dim), floorDiv(o[1], dim), floorDiv(o[2], dim))]];
+        Brick& brick = mBricks[index[openvdb::Coord(detail::floorDiv(o[0], dim), detail::floorDiv(o[1], dim), detail::floorDiv(o[2], dim))]];
         brick.blocks.push_back(std::uint32_t(b));
         brick.activeVoxels += domain.blockMask(b).count();
     }
     for (const Brick& b : mBricks) mMaxBlocks = std::max(mMaxBlocks, b.blocks.size());
 }
 
+BrickLayout BrickLayout::subset(const std::vector<std::size_t>& ids) const
+{
+    BrickLayout out(*this);
+    out.mBricks.clear();
+    out.mMaxBlocks = 0;
+    for (std::size_t id : ids) {
+        if (id >= mBricks.size()) {
+            throw InputError("brick " + std::to_string(id) + " is not in a layout of " + std::to_string(mBricks.size()) +
+                             " bricks");
+        }
+        out.mBricks.push_back(mBricks[id]);
+        out.mMaxBlocks = std::max(out.mMaxBlocks, mBricks[id].blocks.size());
+    }
+    return out;
+}
+
 int defaultBrickDim(const LicSettings& settings)
 {
-    // Measured on the 128³ abc bake (docs/performance.md): 64 is the fastest for kernels up to
-    // ~24 voxels; longer kernels need larger bricks to keep the window tails a small part of
-    // each line.
-    const double L = settings.length;
-    if (L <= 24) return 64;
-    if (L <= 48) return 96;
-    return 128;
+    // Measured on the 128³ abc bake (docs/performance.md): 64 for kernels up to ~24 voxels;
+    // longer kernels need larger bricks to keep the window tails (n samples past each end of a
+    // line) a small part of each line. Powers of two, so power-of-two volumes split evenly.
+    return settings.length <= 24 ? 64 : 128;
 }
 
 int ghostMargin(const LicSettings& settings)

@@ -8,10 +8,6 @@
 
 namespace lic {
 
-namespace {
-int floorDiv(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
-} // namespace
-
 OutputDomain::OutputDomain(const VelocityField& field, int upsample)
     : mUpsample(upsample)
 {
@@ -63,7 +59,7 @@ OutputDomain::OutputDomain(const VelocityField& field, int upsample)
             for (int off = 0; off < kBlockVoxels; ++off) {
                 const openvdb::Coord ijk = origin + openvdb::Coord(off >> 6, (off >> 3) & 7, off & 7);
                 if (!mBBox.isInside(ijk)) continue;
-                const openvdb::Coord f(floorDiv(ijk[0], K), floorDiv(ijk[1], K), floorDiv(ijk[2], K));
+                const openvdb::Coord f(detail::floorDiv(ijk[0], K), detail::floorDiv(ijk[1], K), detail::floorDiv(ijk[2], K));
                 if (acc.isValueOn(f)) masks[b].set(std::size_t(off));
             }
         }

@@ -308,15 +308,16 @@ double spotPeak(const LicSettings& settings, double radius)
     return peak;
 }
 
-LicResult convolveSpots(const VelocityField& field, const OutputDomain& domain, const SpotSet& spots,
-                        const std::vector<double>& radii, double haloScale, const LicSettings& settings,
-                        Progress& progress)
+namespace {
+/// Call fn(texture) with the K-level spot texture, K = radii.size() in [1, 4].
+template<typename Fn>
+auto withSpotTexture(const SpotSet& spots, const std::vector<double>& radii, double haloScale, Fn&& fn)
 {
     auto run = [&]<int K>() {
         std::array<double, K> r{};
         std::copy(radii.begin(), radii.end(), r.begin());
         const SpotTexture<K> texture(spots, r, haloScale);
-        return convolve(field, domain, texture, settings, progress);
+        return fn(texture);
     };
     switch (radii.size()) {
     case 1: return run.template operator()<1>();
@@ -328,28 +329,25 @@ LicResult convolveSpots(const VelocityField& field, const OutputDomain& domain, 
                          " radii; between 1 and 4 width levels are supported");
     }
 }
+} // namespace
+
+LicResult convolveSpots(const VelocityField& field, const OutputDomain& domain, const SpotSet& spots,
+                        const std::vector<double>& radii, double haloScale, const LicSettings& settings,
+                        Progress& progress)
+{
+    return withSpotTexture(spots, radii, haloScale,
+                           [&](const auto& texture) { return convolve(field, domain, texture, settings, progress); });
+}
 
 LicStats convolveSpotBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
                             const SpotSet& spots, const std::vector<double>& radii, double haloScale,
                             const LicSettings& settings, Progress& progress, const BrickSink& sink)
 {
-    auto run = [&]<int K>() {
-        std::array<double, K> r{};
-        std::copy(radii.begin(), radii.end(), r.begin());
-        const SpotTexture<K> texture(spots, r, haloScale);
+    return withSpotTexture(spots, radii, haloScale, [&](const auto& texture) {
+        using Texture = std::remove_cvref_t<decltype(texture)>;
         return convolveBricks(
-            field, domain, layout, [&](const Brick&) -> const SpotTexture<K>& { return texture; }, settings, progress,
-            sink);
-    };
-    switch (radii.size()) {
-    case 1: return run.template operator()<1>();
-    case 2: return run.template operator()<2>();
-    case 3: return run.template operator()<3>();
-    case 4: return run.template operator()<4>();
-    default:
-        throw InputError("input.radii has " + std::to_string(radii.size()) +
-                         " radii; between 1 and 4 width levels are supported");
-    }
+            field, domain, layout, [&](const Brick&) -> const Texture& { return texture; }, settings, progress, sink);
+    });
 }
 
 } // namespace lic

@@ -111,7 +111,7 @@ void referenceNaive(benchmark::State& state)
     const openvdb::Vec3SGrid& g = *s.preset.velocity;
     const openvdb::CoordBBox fb = g.evalActiveVoxelBoundingBox();
     const openvdb::Coord dim = fb.dim();
-    std::vector<openvdb::Vec3f> dense(std::size_t(dim[0]) * std::size_t(dim[1]) * std::size_t(dim[2]));
+    std::vector<openvdb::Vec3f> dense(std::size_t{0} + std::size_t(dim[0]) * std::size_t(dim[1]) * std::size_t(dim[2]));
     {
         auto acc = g.getConstAccessor();
         for (int i = 0; i < dim[0]; ++i)

@@ -209,7 +209,7 @@ TEST_F(StreamBake, StreamedPercentilesAreExact)
     for (const std::string name : {"speed", "vorticity"}) {
         const openvdb::FloatGrid::Ptr s = lic::deriveScalar(*f.velocity, name);
         std::vector<float> v;
-        vdbexport::pipeline::ScalarProbe probe(*s);
+        const vdbexport::pipeline::ScalarField probe(s);
         for (std::size_t b = 0; b < domain.blockCount(); ++b) {
             const auto& mask = domain.blockMask(b);
             for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off))
@@ -222,7 +222,7 @@ TEST_F(StreamBake, StreamedPercentilesAreExact)
         };
         const std::array<double, 2> expected{pct(0.01), pct(0.99)};
         for (int threads : {1, 2}) {
-            const auto got = vdbexport::pipeline::autoRange(*s, domain, threads);
+            const auto got = vdbexport::pipeline::autoRange(probe, domain, threads);
             EXPECT_EQ(got[0], expected[0]) << name;
             EXPECT_EQ(got[1], expected[1]) << name;
         }

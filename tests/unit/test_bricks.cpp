@@ -95,6 +95,16 @@ TEST(Bricks, ABricksResultDependsOnlyOnTheBrick)
         fastLicBrick<NoiseTexture, false>(field, domain, layout[i], bi, fresh(layout[i]), s, scratch, out, st);
         ASSERT_TRUE(sameBits(out, whole.at(i))) << "brick " << i;
     }
+    // A share of the bricks (as one process of a distributed bake gets) gives the same bits,
+    // keyed by the same ids.
+    const BrickLayout share = layout.subset({5, 1, 17});
+    ASSERT_EQ(share.size(), 3u);
+    NoiseBrickSource shareNoise(9, NoiseFilter::Binomial, ghostMargin(s));
+    const auto part = collect(field, domain, share, shareNoise, s);
+    ASSERT_EQ(part.size(), 3u);
+    for (std::size_t id : {5u, 1u, 17u}) EXPECT_TRUE(sameBits(part.at(id), whole.at(id))) << "brick " << id;
+    EXPECT_THROW(layout.subset({layout.size()}), InputError);
+
     const NoiseTexture global(9, domain.indexBBox());
     const LicResult r = convolve(field, domain, global, s);
     for (std::size_t i = 0; i < layout.size(); ++i) {

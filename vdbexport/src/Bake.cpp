@@ -111,13 +111,13 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
     pipeline::Ranges ranges;
     if (recipe.width) {
         ranges.width = recipe.width->range ? *recipe.width->range
-                                           : pipeline::autoRange(*scalars.get(recipe.width->scalar), domain, recipe.threads);
+                                           : pipeline::autoRange(pipeline::ScalarField(scalars.get(recipe.width->scalar)), domain, recipe.threads);
     }
     std::optional<lic::Colormap> cmap;
     if (recipe.color) {
         cmap = loadColormap(recipe.color->colormap);
         ranges.color = recipe.color->range ? *recipe.color->range
-                                           : pipeline::autoRange(*scalars.get(recipe.color->scalar), domain, recipe.threads);
+                                           : pipeline::autoRange(pipeline::ScalarField(scalars.get(recipe.color->scalar)), domain, recipe.threads);
     }
 
     // 4. Input texture: spots placed once; noise made per brick.

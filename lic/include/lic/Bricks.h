@@ -21,6 +21,7 @@ struct LicSettings;
 /// multiples of dim in index space) and the domain's active blocks inside it.
 struct Brick
 {
+    std::size_t id = 0;                 ///< number in the whole domain's layout (x-major), kept by subset()
     openvdb::CoordBBox box;             ///< output voxels owned, inclusive; may reach past the domain
     std::vector<std::uint32_t> blocks;  ///< indices of the domain's blocks inside, ascending
     std::uint64_t activeVoxels = 0;     ///< active output voxels owned
@@ -41,6 +42,10 @@ public:
     const std::vector<Brick>& bricks() const { return mBricks; }
     /// Largest number of blocks in one brick (sizes per-thread buffers).
     std::size_t maxBlocks() const { return mMaxBlocks; }
+    /// The bricks with these ids only (a process's share of a distributed bake), in the order
+    /// given; each keeps its id, so results keyed by id do not depend on the share.
+    /// @throw lic::InputError for an id that is not in the layout.
+    BrickLayout subset(const std::vector<std::size_t>& ids) const;
 
 private:
     int mDim;

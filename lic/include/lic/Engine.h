@@ -96,7 +96,7 @@ struct LicResult
 /// order) `channels` runs of 512 floats in leaf-offset order; inactive voxels hold 0.
 struct BrickChannels
 {
-    std::size_t index = 0;          ///< the brick's number in its BrickLayout
+    std::size_t index = 0;          ///< the brick's id (its number in the whole domain's layout)
     const Brick* brick = nullptr;
     int channels = 0;
     const float* values = nullptr;
@@ -195,7 +195,7 @@ LicStats convolveBricks(const VelocityField& field, const OutputDomain& domain, 
             if (settings.ripple) naiveLicBrick<Texture, true>(field, domain, brick, texture, settings, w.out, w.stats, progress);
             else naiveLicBrick<Texture, false>(field, domain, brick, texture, settings, w.out, w.stats, progress);
         }
-        sink(BrickChannels{i, &brick, K, w.out.data()});
+        sink(BrickChannels{brick.id, &brick, K, w.out.data()});
     };
 
     progress.begin(fast ? "fast LIC" : "naive LIC", domain.activeVoxelCount());
@@ -222,7 +222,7 @@ LicStats convolveBricks(const VelocityField& field, const OutputDomain& domain, 
         stats.streamlines += w.stats.streamlines;
     }
     stats.voxels = domain.activeVoxelCount();
-    stats.bricks = layout.size();
+    stats.bricks = layout.size(); // convolved here (a subset's share in a distributed bake)
     stats.brickDim = layout.dim();
     stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return stats;

@@ -104,59 +104,6 @@ StopReason traceStreamline(const VelocityField& f, const openvdb::Vec3d& seed, d
     return StopReason::Length;
 }
 
-/// As traceStreamline, but RK4 integrates `stride` samples per step (step stride·h) and places the
-/// samples in between by cubic Hermite interpolation of the step's end points and unit directions
-/// (the dense output of the RK45 path): one field lookup per sample instead of four at stride 4.
-/// Where a long step fails (it would leave the domain or meet ~zero velocity), the rest of the
-/// line is traced with single steps of h, so the line ends where traceStreamline's would.
-/// RK45 is adaptive already and is traced as traceStreamline does.
-template<typename OnSample>
-StopReason traceStreamlineStrided(const VelocityField& f, const openvdb::Vec3d& seed, double sign,
-                                  const TraceSettings& s, int stride, std::vector<openvdb::Vec3d>& out,
-                                  OnSample&& onSample)
-{
-    if (s.integrator == Integrator::RK45 || stride <= 1) return traceStreamline(f, seed, sign, s, out, onSample);
-    using openvdb::Vec3d;
-    StopReason why = StopReason::Length;
-    Vec3d x = seed, k1;
-    if (!detail::direction(f, x, sign, s.minSpeed, k1, why)) return why;
-    int i = 0;
-    while (i < s.maxSamples) {
-        const int m = std::min(stride, s.maxSamples - i);
-        const double H = s.step * double(m);
-        Vec3d x1, d1;
-        StopReason longWhy = StopReason::Length;
-        if (m > 1 && detail::rk4Step(f, x, k1, H, sign, s.minSpeed, x1, longWhy) &&
-            detail::direction(f, x1, sign, s.minSpeed, d1, longWhy)) {
-            const Vec3d t0 = k1 * H, t1 = d1 * H;
-            for (int j = 1; j < m; ++j) {
-                const double t = double(j) / double(m), t2 = t * t, t3 = t2 * t;
-                const Vec3d p = (2 * t3 - 3 * t2 + 1) * x + (t3 - 2 * t2 + t) * t0 + (3 * t2 - 2 * t3) * x1 +
-                                (t3 - t2) * t1;
-                out.push_back(p);
-                if (!onSample(p)) return StopReason::Caller;
-            }
-            out.push_back(x1);
-            if (!onSample(x1)) return StopReason::Caller;
-            x = x1;
-            k1 = d1;
-            i += m;
-            continue;
-        }
-        // Near a wall or a critical point: single steps from here on.
-        for (; i < s.maxSamples; ++i) {
-            Vec3d next;
-            if (!detail::rk4Step(f, x, k1, s.step, sign, s.minSpeed, next, why)) return why;
-            out.push_back(next);
-            if (!onSample(next)) return StopReason::Caller;
-            x = next;
-            if (i + 1 < s.maxSamples && !detail::direction(f, x, sign, s.minSpeed, k1, why)) return why;
-        }
-        return StopReason::Length;
-    }
-    return StopReason::Length;
-}
-
 namespace detail {
 /// One RK4 step of world arc length h in the field's INDEX space (directions from
 /// VelocityField::directionIndex): the world-space step mapped through the affine transform.
@@ -245,8 +192,8 @@ void advanceSide(const VelocityField& f, IndexSide& s, const TraceSettings& ts, 
 } // namespace detail
 
 /// The fast engine's tracer: both sides of the streamline through `seedIdx` (upstream to `onBack`,
-/// downstream to `onFwd`), as two traceStreamlineStrided() calls would give them, but in the
-/// field's INDEX space (VelocityField::directionIndex; no transform per lookup) and in lockstep:
+/// downstream to `onFwd`), as two traceStreamline() calls would give them, but in the field's
+/// INDEX space (VelocityField::directionIndex; no transform per lookup) and in lockstep:
 /// the two sides' RK4 stages are interleaved, so the CPU overlaps their latency chains. RK4
 /// integrates `stride` samples per step and places the ones between by cubic Hermite
 /// interpolation; where a long step fails, that side continues in single steps of h, so it ends

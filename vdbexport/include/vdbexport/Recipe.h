@@ -109,7 +109,7 @@ struct LicSpec
     double tolerance = 1e-3;         ///< `tolerance`: rk45 error tolerance, > 0
     int minHits = 2;                 ///< `min_hits`: fast-LIC deposits before a voxel is no seed, [1, 64]
     /// `brick`: brick edge in output voxels, a multiple of 8 in [8, 512]; 0 = automatic (64 for
-    /// kernels up to 24 voxels, larger for longer ones). The output depends on it, never on threads.
+    /// kernels up to 24 voxels, else 128). The output depends on it, never on threads.
     int brick = 0;
 
     bool operator==(const LicSpec&) const = default;

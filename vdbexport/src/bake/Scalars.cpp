@@ -1,10 +1,11 @@
 #include "Scalars.h"
 
+#include "lic/Error.h"
 #include "lic/Parallel.h"
 #include "lic/Region.h"
 #include "lic/Scalars.h"
 
-#include <openvdb/tools/Interpolation.h>
+#include <openvdb/tools/Dense.h>
 
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
@@ -30,21 +31,28 @@ openvdb::FloatGrid::ConstPtr ScalarSet::get(const std::string& name)
     return mCache[name] = g;
 }
 
-ScalarProbe::ScalarProbe(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& bb)
-    : mGrid(grid)
-    , mAcc(grid.getConstAccessor())
-    , mLo(bb.min().asVec3d())
-    , mHi(bb.max().asVec3d())
+ScalarField::ScalarField(openvdb::FloatGrid::ConstPtr grid)
+    : mGrid(std::move(grid))
 {
-}
-
-float ScalarProbe::at(const openvdb::Vec3d& world)
-{
-    openvdb::Vec3d idx = mGrid.worldToIndex(world);
-    for (int a = 0; a < 3; ++a) idx[a] = std::clamp(idx[a], mLo[a], mHi[a]);
-    float v = 0.0f;
-    openvdb::tools::BoxSampler::sample(mAcc, idx, v);
-    return v;
+    const openvdb::CoordBBox bb = mGrid->evalActiveVoxelBoundingBox();
+    if (bb.empty()) throw lic::InputError("scalar grid \"" + mGrid->getName() + "\" has no active voxels");
+    const openvdb::Coord dim = bb.dim();
+    if (double(dim[0]) * dim[1] * dim[2] > double(1u << 28)) {
+        throw lic::InputError("scalar grid \"" + mGrid->getName() + "\" has an active bounding box of more than 2^28 "
+                              "voxels; crop or resample the field");
+    }
+    mWorldToIndex = lic::AffineMap(mGrid->transform()).worldToIndex;
+    for (int a = 0; a < 3; ++a) {
+        mLo[a] = bb.min()[a];
+        mHi[a] = bb.max()[a];
+        mDim[a] = dim[a];
+    }
+    mStride[0] = std::size_t(dim[1]) * std::size_t(dim[2]);
+    mStride[1] = std::size_t(dim[2]);
+    mStride[2] = 1;
+    openvdb::tools::Dense<float, openvdb::tools::LayoutZYX> dense(bb, 0.0f);
+    openvdb::tools::copyToDense(*mGrid, dense);
+    mData.assign(dense.data(), dense.data() + dense.valueCount());
 }
 
 namespace {
@@ -62,19 +70,16 @@ using Histogram = std::vector<std::uint64_t>;
 /// A histogram of `bins` bins over the finite samples at every active output voxel: `add(key, h)`
 /// counts a sample's order key into h.
 template<typename Add>
-Histogram histogram(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain, int threads, std::size_t bins,
-                    Add add)
+Histogram histogram(const ScalarField& scalar, const lic::OutputDomain& domain, int threads, std::size_t bins, Add add)
 {
     tbb::combinable<Histogram> parts([bins] { return Histogram(bins, 0); });
-    const openvdb::CoordBBox box = scalar.evalActiveVoxelBoundingBox();
     lic::detail::runWithThreads(threads, [&] {
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, domain.blockCount()), [&](const auto& r) {
-            ScalarProbe probe(scalar, box);
             Histogram& h = parts.local();
             for (std::size_t b = r.begin(); b != r.end(); ++b) {
                 const auto& mask = domain.blockMask(b);
                 for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off)) {
-                    const float v = probe.at(domain.worldOf(domain.coordOf(b * lic::OutputDomain::kBlockVoxels + off)));
+                    const float v = scalar.at(domain.worldOf(domain.coordOf(b * lic::OutputDomain::kBlockVoxels + off)));
                     if (std::isfinite(v)) add(orderKey(v), h);
                 }
             }
@@ -100,7 +105,7 @@ std::pair<int, std::uint64_t> binOfRank(const Histogram& h, std::uint64_t k)
 
 } // namespace
 
-std::array<double, 2> autoRange(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain, int threads)
+std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDomain& domain, int threads)
 {
     constexpr std::size_t kBins = 65536;
     const Histogram coarse =
