@@ -44,7 +44,13 @@ Window windowOf(const LicSettings& s)
 } // namespace
 
 SplatTables::SplatTables(const std::vector<double>& radii, const LicSettings& settings)
-    : mC(int(radii.size()))
+    : mRadii(radii)
+    , mH(settings.step)
+    , mDecay(settings.decay)
+    , mTheta(detail::rippleStep(settings.halfSamples()))
+    , mExp(settings.kernel == KernelType::Exp)
+    , mRipple(settings.ripple)
+    , mC(int(radii.size()))
     , mParts(settings.ripple ? 3 * int(radii.size()) : int(radii.size()))
     , mReach(0)
 {
@@ -104,6 +110,26 @@ void SplatTables::add(double tau, double d, float a, float* out) const
     const float* c11 = c10 + P;
     const float w00 = a * (1 - wt) * (1 - wd), w01 = a * (1 - wt) * wd, w10 = a * wt * (1 - wd), w11 = a * wt * wd;
     for (std::size_t p = 0; p < P; ++p) out[p] += w00 * c00[p] + w01 * c01[p] + w10 * c10[p] + w11 * c11[p];
+}
+
+void SplatTables::addDirect(double tau, double d, float a, int i0, int i1, double weight, float* out) const
+{
+    i0 = std::max(i0, int(std::ceil((-mReach - tau) / mH)));
+    i1 = std::min(i1, int(std::floor((mReach - tau) / mH)));
+    for (int i = i0; i <= i1; ++i) {
+        const double along = tau + double(i) * mH, r = std::sqrt(d * d + along * along);
+        const double w = (mExp ? std::pow(mDecay, double(i)) : 1.0) * double(a) / weight;
+        for (int c = 0; c < mC; ++c) {
+            double slope;
+            const double f = spotProfile(r, mRadii[std::size_t(c)], slope);
+            if (f == 0.0) continue;
+            out[c] += float(w * f);
+            if (mRipple) {
+                out[mC + c] += float(double(a) / weight * f * std::cos(mTheta * double(i)));
+                out[2 * mC + c] += float(double(a) / weight * f * std::sin(mTheta * double(i)));
+            }
+        }
+    }
 }
 
 namespace {
@@ -247,8 +273,10 @@ LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain,
                 L.count = int(all.size());
                 L.centre = int(back.size());
                 auto natural = [](StopReason w) { return w == StopReason::Boundary || w == StopReason::ZeroVelocity; };
-                if (natural(whyB)) L.endBack = -double(back.size()) * h;
-                if (natural(whyF)) L.endFwd = double(pts.size()) * h;
+                // The wall (or critical point) lies between the last sample and the next one: take
+                // the middle, so a voxel's window is cut where, on average, its own line ends.
+                if (natural(whyB)) L.endBack = -(double(back.size()) + 0.5) * h;
+                if (natural(whyF)) L.endFwd = (double(pts.size()) + 0.5) * h;
                 L.lo = L.hi = all.front();
                 for (const auto& p : all) {
                     L.lo = openvdb::math::minComponent(L.lo, p);
@@ -384,6 +412,9 @@ LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain,
                 if (j == L.count - 1) break;
             }
             const float weight = spots.weights[s];
+            // A spot within reach of where its line ends: part of it lies beyond the wall, where
+            // no window sample can see it; sum its windows directly instead of from the tables.
+            const bool nearWall = L.endFwd < reach + h || L.endBack > -(reach + h);
             const Xform* G = &xforms[L.first];
             const openvdb::Vec3d t0(L.tangent);
             for (std::int64_t l : sc.touched) {
@@ -418,7 +449,8 @@ LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain,
                     std::fill_n(sc.nearest.begin() + std::ptrdiff_t(lb * V), V, std::numeric_limits<float>::max());
                 }
                 std::fill(sc.parts.begin(), sc.parts.end(), 0.0f);
-                tables.add(tau, d, float(double(weight) * winTotal / inside), sc.parts.data());
+                if (nearWall) tables.addDirect(tau, d, weight, i0, i1, inside, sc.parts.data());
+                else tables.add(tau, d, float(double(weight) * winTotal / inside), sc.parts.data());
                 float* acc = &sc.acc[li * std::size_t(K)];
                 for (int p = 0; p < tables.parts(); ++p) acc[p] += sc.parts[std::size_t(p)];
                 if (settings.ripple && float(d) < sc.nearest[li]) {

@@ -187,7 +187,7 @@ int main(int argc, char** argv)
     bake->add_option("-r,--recipe", recipePath, "JSON recipe; flags override its values");
     auto* oInput = bake->add_option("--input", cli.input.type, "Input texture: noise|spots [noise]");
     auto* oFilter = bake->add_option("--noise-filter", cli.input.noiseFilter, "Noise reconstruction: binomial|none [binomial]");
-    auto* oEngine = bake->add_option("--engine", cli.lic.engine, "naive|fast [fast]");
+    auto* oEngine = bake->add_option("--engine", cli.lic.engine, "auto|naive|fast|splat: auto = splat for spots, fast for noise [auto]");
     auto* oKernel = bake->add_option("--kernel", cli.lic.kernel, "box|exp (oriented streamlets, bright head downstream) [box]");
     auto* oDecay = bake->add_option("--decay", cli.lic.decay, "exp kernel: weight ratio of consecutive samples, (0,1) [0.9]");
     auto* oLength = bake->add_option("--length", cli.lic.length, "Kernel half-length, output voxels [20]");

@@ -87,8 +87,11 @@ double peakRssMiB()
 } // namespace
 
 // The pipeline of DESIGN.md, top to bottom; each stage lives in src/bake/.
-nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
+nlohmann::json bake(const Recipe& request, lic::Progress& progress)
 {
+    // The engine "auto" is resolved here, so the recipe a bake records names the engine it used.
+    Recipe recipe = request;
+    if (recipe.lic.engine == "auto") recipe.lic.engine = recipe.input.type == "spots" ? "splat" : "fast";
     using Clock = std::chrono::steady_clock;
     auto seconds = [](Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); };
     const auto t0 = Clock::now();

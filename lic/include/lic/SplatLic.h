@@ -47,8 +47,15 @@ public:
     double tauMax() const { return mTauMax; }
     /// Add a·W(τ, d) for every part to out[0 .. parts). No-op outside the support.
     void add(double tau, double d, float a, float* out) const;
+    /// The same sum worked out directly over window samples i0 … i1 only (a window cut by a wall),
+    /// normalised by `weight`, the kernel weight of those samples: for spots within reach of a
+    /// wall, where the part of the spot beyond the wall must not count.
+    void addDirect(double tau, double d, float a, int i0, int i1, double weight, float* out) const;
 
 private:
+    std::vector<double> mRadii;
+    double mH, mDecay, mTheta;
+    bool mExp, mRipple;
     int mC, mParts;
     double mReach, mTauMin, mTauMax;
     double mDTau, mDD;
