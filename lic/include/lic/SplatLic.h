@@ -16,7 +16,7 @@
 // is cut there too: W is rescaled by Σ_all w_i / Σ_inside w_i (the spot's own samples are all inside,
 // so only the normalisation changes). It differs from the gather where the flow diverges or
 // converges across the tube (x's line drifts from σ_s over the window) and where a spot lies within
-// its radius of a wall. docs/technique.md §9 has the derivation and the measured agreement.
+// its radius of a wall. docs/technique.md §10 has the derivation and the measured agreement.
 //
 // Deterministic: spots are traced independently; each brick then deposits the spots that reach it,
 // in spot order, into its own voxels only.
