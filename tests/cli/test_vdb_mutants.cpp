@@ -34,19 +34,6 @@ std::set<std::string> listing(const fs::path& dir)
     return out;
 }
 
-/// Offset of the first blosc header that says it holds `nbytes` bytes (see test_vdbcheck.cpp).
-std::size_t findBloscHeader(const std::string& bytes, uint32_t nbytes)
-{
-    for (std::size_t i = 8; i + 16 <= bytes.size(); ++i) {
-        uint32_t n = 0, cbytes = 0;
-        int64_t stored = 0;
-        std::memcpy(&n, &bytes[i + 4], 4);
-        std::memcpy(&cbytes, &bytes[i + 12], 4);
-        std::memcpy(&stored, &bytes[i - 8], 8);
-        if (bytes[i] == 2 && n == nbytes && stored == int64_t(cbytes)) return i;
-    }
-    return std::string::npos;
-}
 
 /// The `seed` of the recipe stored in the `density` grid of a bake.
 int64_t recipeSeedInFile(const fs::path& vdb)
@@ -89,7 +76,7 @@ TEST_F(VdbMutantsTest, InfoCheckExitsZeroForIntactFilesAndTwoWithTheReasonOtherw
 
     // The lie of issue 19: a vec3s leaf's blosc block claiming 8182 bytes (the leaf holds 6144).
     std::string bytes = readText(samples[0]);
-    const std::size_t at = findBloscHeader(bytes, 6144);
+    const std::size_t at = vdb_mutants::findBloscHeader(bytes, 6144);
     ASSERT_NE(at, std::string::npos);
     const uint32_t lie = 8182;
     std::memcpy(&bytes[at + 4], &lie, 4);

@@ -31,6 +31,21 @@ inline std::vector<std::size_t> sizeLikeWords(const std::string& bytes, std::siz
     return at;
 }
 
+/// Offset of the first blosc header in `bytes` that says it holds `nbytes` bytes, or npos: the
+/// header follows the int64 compressed-size word OpenVDB stores before each compressed buffer.
+inline std::size_t findBloscHeader(const std::string& bytes, uint32_t nbytes)
+{
+    for (std::size_t i = 8; i + 16 <= bytes.size(); ++i) {
+        uint32_t n = 0, cbytes = 0;
+        int64_t stored = 0;
+        std::memcpy(&n, &bytes[i + 4], 4);
+        std::memcpy(&cbytes, &bytes[i + 12], 4);
+        std::memcpy(&stored, &bytes[i - 8], 8);
+        if (bytes[i] == 2 && n == nbytes && stored == int64_t(cbytes)) return i;
+    }
+    return std::string::npos;
+}
+
 /// One mutant of `bytes` of the given kind (0 … kKinds-1), drawn from `rng`.
 inline std::string mutate(const std::string& bytes, int kind, std::mt19937_64& rng)
 {

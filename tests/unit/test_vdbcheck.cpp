@@ -72,19 +72,6 @@ std::string inputErrorOf(const std::function<void()>& fn)
 #define EXPECT_CONTAINS(haystack, needle) \
     EXPECT_NE(std::string(haystack).find(needle), std::string::npos) << "expected \"" << (needle) << "\" in: " << (haystack)
 
-/// Offset of the first blosc header in `bytes` that says it holds `nbytes` bytes, or npos.
-std::size_t findBloscHeader(const std::string& bytes, uint32_t nbytes)
-{
-    for (std::size_t i = 8; i + 16 <= bytes.size(); ++i) {
-        uint32_t n = 0, cbytes = 0;
-        int64_t stored = 0;
-        std::memcpy(&n, &bytes[i + 4], 4);
-        std::memcpy(&cbytes, &bytes[i + 12], 4);
-        std::memcpy(&stored, &bytes[i - 8], 8);
-        if (bytes[i] == 2 && n == nbytes && stored == int64_t(cbytes)) return i;
-    }
-    return std::string::npos;
-}
 
 } // namespace
 
@@ -127,7 +114,7 @@ TEST_F(VdbCheckTest, LyingBloscSizeInAVec3LeafIsRefusedBeforeOpenVdbReadsIt)
 {
     const auto samples = vdb_samples::writeVdbSamples(mDir);
     std::string bytes = readFile(samples[0]);
-    const std::size_t at = findBloscHeader(bytes, 6144);
+    const std::size_t at = vdb_mutants::findBloscHeader(bytes, 6144);
     ASSERT_NE(at, std::string::npos) << "no full vec3s leaf block in the sample";
     const uint32_t lie = 8182;
     std::memcpy(&bytes[at + 4], &lie, 4);

@@ -454,14 +454,18 @@ void Checker::bloscBlock(const std::vector<char>& data, uint64_t bytes, bool boo
 void Checker::block(uint64_t bytes, bool boolValues, const char* what)
 {
     using namespace openvdb::io;
-    if (!(mCompression & (COMPRESS_BLOSC | COMPRESS_ZIP))) {
+    // An uncompressed block: only bool values have bytes worth looking at.
+    const auto raw = [&] {
         if (boolValues) {
-            std::vector<char> raw(bytes);
-            read(raw.data(), bytes, what);
-            checkBools(raw.data(), bytes);
+            std::vector<char> values(bytes);
+            read(values.data(), bytes, what);
+            checkBools(values.data(), bytes);
         } else {
             skip(bytes, what);
         }
+    };
+    if (!(mCompression & (COMPRESS_BLOSC | COMPRESS_ZIP))) {
+        raw();
         return;
     }
     const bool blosc = mCompression & COMPRESS_BLOSC; // OpenVDB prefers blosc when both are set
@@ -471,13 +475,7 @@ void Checker::block(uint64_t bytes, bool boolValues, const char* what)
         if (n != bytes)
             throw corrupt(std::string(what) + " stores " + std::to_string(n) + " uncompressed bytes where "
                           + std::to_string(bytes) + " are expected");
-        if (boolValues) {
-            std::vector<char> raw(bytes);
-            read(raw.data(), bytes, what);
-            checkBools(raw.data(), bytes);
-        } else {
-            skip(bytes, what);
-        }
+        raw();
         return;
     }
     const uint64_t n = uint64_t(stored);
