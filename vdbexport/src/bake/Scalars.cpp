@@ -15,17 +15,46 @@
 
 namespace vdbexport::pipeline {
 
+namespace {
+const char* const kWholeBoxMin = "licvdb_whole_active_bbox_min";
+const char* const kWholeBoxMax = "licvdb_whole_active_bbox_max";
+} // namespace
+
+openvdb::CoordBBox activeBoxOf(const openvdb::GridBase& grid)
+{
+    const auto lo = grid.getMetadata<openvdb::Vec3IMetadata>(kWholeBoxMin);
+    const auto hi = grid.getMetadata<openvdb::Vec3IMetadata>(kWholeBoxMax);
+    if (lo && hi) return openvdb::CoordBBox(openvdb::Coord(lo->value()), openvdb::Coord(hi->value()));
+    return grid.evalActiveVoxelBoundingBox();
+}
+
+void setWholeActiveBox(openvdb::GridBase& grid, const openvdb::CoordBBox& box)
+{
+    grid.insertMeta(kWholeBoxMin, openvdb::Vec3IMetadata(box.min().asVec3i()));
+    grid.insertMeta(kWholeBoxMax, openvdb::Vec3IMetadata(box.max().asVec3i()));
+}
+
 openvdb::FloatGrid::ConstPtr ScalarSet::get(const std::string& name)
 {
     const std::lock_guard lock(mMutex);
     if (auto it = mCache.find(name); it != mCache.end()) return it->second;
     static const std::string kGradient = "-gradient";
+    const bool part = mVelocity.getMetadata<openvdb::Vec3IMetadata>(kWholeBoxMin) != nullptr;
     openvdb::FloatGrid::ConstPtr g;
     if (name.size() > kGradient.size() && name.ends_with(kGradient)) {
         const auto base = lic::resolveScalar(mVelocity, mFile, name.substr(0, name.size() - kGradient.size()));
-        g = lic::gradientMagnitude(*base, name);
+        auto grad = lic::gradientMagnitude(*base, name);
+        // Same active topology as its base: a part's whole box is the base's.
+        if (base->getMetadata<openvdb::Vec3IMetadata>(kWholeBoxMin)) setWholeActiveBox(*grad, activeBoxOf(*base));
+        g = grad;
     } else {
         g = lic::resolveScalar(mVelocity, mFile, name);
+        if (part && !g->getMetadata<openvdb::Vec3IMetadata>(kWholeBoxMin)) {
+            // Derived from a part of the velocity (file scalars carry their own box): the
+            // velocity's topology, so its whole box.
+            auto derived = openvdb::ConstPtrCast<openvdb::FloatGrid>(g);
+            setWholeActiveBox(*derived, activeBoxOf(mVelocity));
+        }
     }
     return mCache[name] = g;
 }
@@ -63,15 +92,17 @@ using Histogram = std::vector<std::uint64_t>;
 /// counts a sample's order key into h.
 template<typename Add>
 Histogram histogram(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain, int threads, std::size_t bins,
-                    Add add)
+                    const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce, Add add)
 {
     tbb::combinable<Histogram> parts([bins] { return Histogram(bins, 0); });
-    const openvdb::CoordBBox box = scalar.evalActiveVoxelBoundingBox();
+    const openvdb::CoordBBox box = activeBoxOf(scalar);
+    const std::size_t count = blocks ? blocks->size() : domain.blockCount();
     lic::detail::runWithThreads(threads, [&] {
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, domain.blockCount()), [&](const auto& r) {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count), [&](const auto& r) {
             ScalarProbe probe(scalar, box);
             Histogram& h = parts.local();
-            for (std::size_t b = r.begin(); b != r.end(); ++b) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                const std::size_t b = blocks ? (*blocks)[i] : i;
                 const auto& mask = domain.blockMask(b);
                 for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off)) {
                     const float v = probe.at(domain.worldOf(domain.coordOf(b * lic::OutputDomain::kBlockVoxels + off)));
@@ -84,6 +115,7 @@ Histogram histogram(const openvdb::FloatGrid& scalar, const lic::OutputDomain& d
     parts.combine_each([&](const Histogram& h) {
         for (std::size_t i = 0; i < all.size(); ++i) all[i] += h[i]; // integer sums: any order
     });
+    if (reduce) reduce(all); // over the processes: integer sums again
     return all;
 }
 
@@ -102,9 +134,15 @@ std::pair<int, std::uint64_t> binOfRank(const Histogram& h, std::uint64_t k)
 
 std::array<double, 2> autoRange(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain, int threads)
 {
+    return autoRange(scalar, domain, threads, nullptr, {});
+}
+
+std::array<double, 2> autoRange(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain, int threads,
+                                const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce)
+{
     constexpr std::size_t kBins = 65536;
-    const Histogram coarse =
-        histogram(scalar, domain, threads, kBins, [](std::uint32_t key, Histogram& h) { ++h[key >> 16]; });
+    const Histogram coarse = histogram(scalar, domain, threads, kBins, blocks, reduce,
+                                       [](std::uint32_t key, Histogram& h) { ++h[key >> 16]; });
     std::uint64_t n = 0;
     for (std::uint64_t c : coarse) n += c;
     if (n == 0) return {0.0, 1.0};
@@ -115,7 +153,7 @@ std::array<double, 2> autoRange(const openvdb::FloatGrid& scalar, const lic::Out
     const auto [bin0, below0] = binOfRank(coarse, ranks[0]);
     const auto [bin1, below1] = binOfRank(coarse, ranks[1]);
     const std::uint32_t hb[2] = {std::uint32_t(bin0), std::uint32_t(bin1)};
-    const Histogram fine = histogram(scalar, domain, threads, 2 * kBins, [&hb](std::uint32_t key, Histogram& h) {
+    const Histogram fine = histogram(scalar, domain, threads, 2 * kBins, blocks, reduce, [&hb](std::uint32_t key, Histogram& h) {
         for (std::size_t i = 0; i < 2; ++i)
             if ((key >> 16) == hb[i]) ++h[i * kBins + (key & 0xffffu)];
     });

@@ -7,9 +7,12 @@
 #include <openvdb/openvdb.h>
 
 #include <array>
+#include <cstdint>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <string>
+#include <vector>
 
 namespace vdbexport::pipeline {
 
@@ -32,16 +35,23 @@ private:
     std::mutex mMutex;
 };
 
+/// The active bounding box of a scalar grid (index space): the box stored on it by
+/// setWholeActiveBox() when the grid holds only part of a field (a distributed bake's share),
+/// else the grid's own. Probes clamp positions to it, so a part samples like the whole.
+openvdb::CoordBBox activeBoxOf(const openvdb::GridBase& grid);
+/// Record on `grid` the active bounding box of the whole grid it is a part of.
+void setWholeActiveBox(openvdb::GridBase& grid, const openvdb::CoordBBox& box);
+
 /// Trilinear values of a float grid at world positions, the position clamped to the grid's active
 /// bounding box (as the velocity sampler does: the outer half voxel repeats the edge value). Holds
 /// a value accessor: one probe per thread.
 class ScalarProbe
 {
 public:
-    /// `activeBox` = grid.evalActiveVoxelBoundingBox(), computed once by the caller (it walks
-    /// the tree) when many probes are made.
+    /// `activeBox` = activeBoxOf(grid), computed once by the caller (it walks the tree) when
+    /// many probes are made.
     ScalarProbe(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& activeBox);
-    explicit ScalarProbe(const openvdb::FloatGrid& grid) : ScalarProbe(grid, grid.evalActiveVoxelBoundingBox()) {}
+    explicit ScalarProbe(const openvdb::FloatGrid& grid) : ScalarProbe(grid, activeBoxOf(grid)) {}
     float at(const openvdb::Vec3d& world);
 
 private:
@@ -56,7 +66,7 @@ struct ScalarSource
     openvdb::FloatGrid::ConstPtr grid;
     openvdb::CoordBBox box;
     ScalarSource() = default;
-    explicit ScalarSource(openvdb::FloatGrid::ConstPtr g) : grid(std::move(g)), box(grid->evalActiveVoxelBoundingBox()) {}
+    explicit ScalarSource(openvdb::FloatGrid::ConstPtr g) : grid(std::move(g)), box(activeBoxOf(*grid)) {}
     explicit operator bool() const { return bool(grid); }
     ScalarProbe probe() const { return ScalarProbe(*grid, box); }
 };
@@ -66,5 +76,13 @@ struct ScalarSource
 /// statistics from two passes of a 65 536-bin histogram over the values' order-preserving bits,
 /// so memory does not grow with the volume; deterministic for any thread count.
 std::array<double, 2> autoRange(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain, int threads);
+
+/// Sums histograms over the processes of a distributed bake, in place (Job::sumAll).
+using HistogramReduce = std::function<void(std::vector<std::uint64_t>&)>;
+/// autoRange() over the voxels of `blocks` only (a process's bricks; null = every block), with
+/// each histogram summed by `reduce` over the processes before the percentiles are read from
+/// it: integer counts, so the range is exactly that of one process over every block.
+std::array<double, 2> autoRange(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain, int threads,
+                                const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce);
 
 } // namespace vdbexport::pipeline

@@ -12,6 +12,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -23,9 +24,13 @@ struct Written
     openvdb::GridPtrVec firstGrids;     ///< frame 1's grids as written (for the manifest and summary)
 };
 
+/// Called with each frame's grids as composed here, before they are written: a distributed
+/// bake adds the other processes' leaves.
+using FrameHook = std::function<void(int frame, openvdb::GridPtrVec& grids)>;
+
 /// Write every frame: `densityMeta` goes on each frame's `density` grid, with `lic_frame`.
 Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::MetaMap& densityMeta,
-                    lic::Progress& progress);
+                    lic::Progress& progress, const FrameHook& gather = {});
 
 /// Write the sidecar manifest of a bake (atomically), after its frames.
 void writeManifest(const Plan& plan, const Written& written, double voxelSize, const nlohmann::json& resolved,
