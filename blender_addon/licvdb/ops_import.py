@@ -9,7 +9,7 @@ from bpy_extras.io_utils import ImportHelper
 from . import manifest as mf
 from mathutils import Matrix, Vector
 
-from . import material, prefs, props
+from . import check, material, prefs, props
 
 
 #: (brightness, line absorption) for dense (noise) bakes; sparse line bakes keep the panel's
@@ -51,6 +51,7 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
             man.cyclic = False  # the manifest of one frame: its grids and colormap still apply
     else:
         files, man = bake_files(path)
+    check.check_bake(context, files, man)  # before Blender's reader sees them (check.py)
     scene = context.scene
     first = files[0]
     stem = os.path.splitext(os.path.basename(man.path if man else first))[0]
@@ -163,7 +164,7 @@ class LICVDB_OT_import_bake(bpy.types.Operator, ImportHelper):
             return {"CANCELLED"}
         try:
             objects = import_paths(context, [bpy.path.abspath(p) for p in paths], setup_render=self.setup_render)
-        except (BakeImportError, mf.ManifestError) as e:
+        except (BakeImportError, mf.ManifestError, check.FileCheckError) as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
         self.report({"INFO"}, "imported " + ", ".join(o.name for o in objects))

@@ -60,6 +60,9 @@ int defaultBrickDim(const LicSettings& settings)
     // Measured on the 128³ abc bake (docs/performance.md): 64 for kernels up to ~24 voxels;
     // longer kernels need larger bricks to keep the window tails (n samples past each end of a
     // line) a small part of each line. Powers of two, so power-of-two volumes split evenly.
+    // The splat engine has no window tails at brick faces (a footprint crossing a face is
+    // rasterised by each brick it reaches, from one trace), so it keeps 64³ for load balance.
+    if (settings.engine == EngineType::Splat) return 64;
     return settings.length <= 24 ? 64 : 128;
 }
 

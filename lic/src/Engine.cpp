@@ -8,13 +8,22 @@
 
 namespace lic {
 
-const char* toString(EngineType e) { return e == EngineType::Naive ? "naive" : "fast"; }
+const char* toString(EngineType e)
+{
+    switch (e) {
+    case EngineType::Naive: return "naive";
+    case EngineType::Fast: return "fast";
+    case EngineType::Splat: return "splat";
+    }
+    return "?";
+}
 
 EngineType engineFromString(const std::string& s)
 {
     if (s == "naive") return EngineType::Naive;
     if (s == "fast") return EngineType::Fast;
-    throw InputError("engine \"" + s + "\" is unknown; expected naive or fast");
+    if (s == "splat") return EngineType::Splat;
+    throw InputError("engine \"" + s + "\" is unknown; expected naive, fast or splat");
 }
 
 const char* toString(KernelType k) { return k == KernelType::Exp ? "exp" : "box"; }

@@ -1,5 +1,7 @@
 #include "lic/Spots.h"
 
+#include "lic/SplatLic.h"
+
 #include "lic/Error.h"
 #include "lic/Noise.h"
 
@@ -335,6 +337,24 @@ LicResult convolveSpots(const VelocityField& field, const OutputDomain& domain, 
                         const std::vector<double>& radii, double haloScale, const LicSettings& settings,
                         Progress& progress)
 {
+    if (settings.engine == EngineType::Splat) {
+        settings.validate();
+        const BrickLayout layout(domain, detail::brickDim(settings));
+        const int C = 2 * int(radii.size()), K = settings.ripple ? 3 * C + 2 : C;
+        LicResult result;
+        result.channels.assign(std::size_t(K), std::vector<float>(domain.slotCount(), 0.0f));
+        result.stats = splatSpotBricks(field, domain, layout, spots, radii, haloScale, settings, progress,
+                                       [&](const BrickChannels& bc) {
+                                           for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i) {
+                                               if (bc.blockTouched && !bc.blockTouched[i]) continue;
+                                               const std::size_t slot0 = std::size_t(bc.brick->blocks[i]) * OutputDomain::kBlockVoxels;
+                                               for (int c = 0; c < K; ++c)
+                                                   std::copy_n(bc.block(i, c), OutputDomain::kBlockVoxels,
+                                                               result.channels[std::size_t(c)].begin() + std::ptrdiff_t(slot0));
+                                           }
+                                       });
+        return result;
+    }
     return withSpotTexture(spots, radii, haloScale,
                            [&](const auto& texture) { return convolve(field, domain, texture, settings, progress); });
 }
@@ -343,6 +363,8 @@ LicStats convolveSpotBricks(const VelocityField& field, const OutputDomain& doma
                             const SpotSet& spots, const std::vector<double>& radii, double haloScale,
                             const LicSettings& settings, Progress& progress, const BrickSink& sink)
 {
+    if (settings.engine == EngineType::Splat)
+        return splatSpotBricks(field, domain, layout, spots, radii, haloScale, settings, progress, sink);
     return withSpotTexture(spots, radii, haloScale, [&](const auto& texture) {
         using Texture = std::remove_cvref_t<decltype(texture)>;
         return convolveBricks(

@@ -110,7 +110,7 @@ TEST(Recipe, DefaultsAreValidAndResolvedJsonHasEveryKey)
     EXPECT_EQ(j["input"]["seed"], 1);
     EXPECT_EQ(j["lic"]["min_hits"], 2);
     EXPECT_EQ(j["lic"]["tolerance"], 1e-3);
-    EXPECT_EQ(j["lic"]["engine"], "fast");
+    EXPECT_EQ(j["lic"]["engine"], "auto"); // resolved by the bake: splat for spots, fast for noise
     EXPECT_EQ(j["animation"]["frames"], 1);
 }
 
@@ -184,7 +184,7 @@ TEST(Recipe, PartialRecipeMergesOntoDefaults)
     const Recipe r = Recipe::fromJson(json::parse(R"({"lic": {"length": 40}, "roi": {"scalar": "speed"}})"));
     EXPECT_EQ(r.lic.length, 40);
     EXPECT_EQ(r.lic.step, 0.5);
-    EXPECT_EQ(r.lic.engine, "fast");
+    EXPECT_EQ(r.lic.engine, "auto");
     ASSERT_TRUE(r.roi.has_value());
     EXPECT_EQ(r.roi->range, (std::array<double, 2>{0, 1}));
     EXPECT_EQ(r.roi->mode, "pre");
@@ -320,7 +320,7 @@ TEST(RecipeValidate, EachRuleNamesTheKey)
         {R"({"lic": {"min_hits": 0}})", "lic.min_hits: must be in [1, 64] (got 0)"},
         {R"({"lic": {"min_hits": 65}})", "lic.min_hits: must be in [1, 64] (got 65)"},
         {R"({"lic": {"engine": "fats"}})",
-            "lic.engine: must be one of \"naive\", \"fast\", \"splat\" (got \"fats\"); did you mean \"fast\"?"},
+            "lic.engine: must be one of \"auto\", \"naive\", \"fast\", \"splat\" (got \"fats\"); did you mean \"fast\"?"},
         {R"({"lic": {"kernel": "gauss"}})", "lic.kernel: must be one of \"box\", \"exp\" (got \"gauss\")"},
         {R"({"lic": {"integrator": "euler"}})", "lic.integrator: must be one of \"rk4\", \"rk45\""},
         {R"({"input": {"type": "dots"}})", "input.type: must be one of \"noise\", \"spots\""},
@@ -423,7 +423,7 @@ TEST(Recipe, WidthRangeAbsentNullAutoOrArray)
 
 TEST(Recipe, AllowedValues)
 {
-    EXPECT_EQ(vdbexport::allowedValues("lic.engine"), (std::vector<std::string>{"naive", "fast", "splat"}));
+    EXPECT_EQ(vdbexport::allowedValues("lic.engine"), (std::vector<std::string>{"auto", "naive", "fast", "splat"}));
     EXPECT_EQ(vdbexport::allowedValues("input.distribution").size(), 4u);
     EXPECT_TRUE(vdbexport::allowedValues("lic.length").empty());
 }

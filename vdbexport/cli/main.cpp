@@ -11,6 +11,7 @@
 #include "vdbexport/Recipe.h"
 #include "vdbexport/Render.h"
 #include "vdbexport/TerminalProgress.h"
+#include "vdbexport/VdbCheck.h"
 #include "vdbexport/VdbIO.h"
 
 #include "lic/Error.h"
@@ -21,6 +22,8 @@
 
 #include <algorithm>
 #include <csignal>
+#include <cstdlib>
+#include <filesystem>
 #include <cstdio>
 #include <iostream>
 #include <new>
@@ -92,6 +95,20 @@ openvdb::Coord parseRes(const std::string& s)
     return openvdb::Coord(v[0], v[1], v[2]);
 }
 
+bool inReadChild()
+{
+    const char* v = std::getenv("LICVDB_READ_CHILD");
+    return v && std::string(v) == "1";
+}
+
+/// This program's path (/proc/self/exe), "" if it cannot be found.
+std::string selfExecutable()
+{
+    std::error_code ec;
+    const auto p = std::filesystem::read_symlink("/proc/self/exe", ec);
+    return ec ? std::string() : p.string();
+}
+
 std::string presetList()
 {
     std::string out;
@@ -101,10 +118,48 @@ std::string presetList()
     return out;
 }
 
+/// `licvdb info --check FILE`: layers 1 and 2 (docs/inputs.md); in the child that layer 2 starts
+/// (LICVDB_READ_CHILD=1), layer 1 and then a full read and description of every grid in-process.
+int checkCommand(const std::string& path, const Common& common)
+{
+    nlohmann::json out{{"path", path}};
+    try {
+        const vdbexport::VdbCheckResult r = vdbexport::detail::checkedVdb(path);
+        if (inReadChild()) (void)vdbexport::describeVdb(path);
+        out["ok"] = true;
+        out["file_version"] = r.fileVersion;
+        out["grids"] = nlohmann::json::array();
+        std::string list;
+        for (const auto& g : r.grids) {
+            nlohmann::json j{{"name", g.name}, {"grid_type", g.gridType}, {"value_type", g.valueType},
+                             {"half_float", g.halfFloat}, {"compression", g.compression}, {"tiles", g.tiles},
+                             {"internal_nodes", g.internalNodes}, {"leaves", g.leaves}};
+            if (g.instance) j["instance_of"] = g.instanceParent;
+            if (!g.skipReason.empty()) j["skipped"] = g.skipReason;
+            out["grids"].push_back(j);
+            list += (list.empty() ? "" : ", ") + g.name + " (" + (g.valueType.empty() ? g.gridType : g.valueType) + ")";
+        }
+        if (common.json) std::cout << out.dump(2) << "\n";
+        else if (!common.quiet) std::cout << path << ": intact (" << r.grids.size() << " grid" << (r.grids.size() == 1 ? "" : "s")
+                                          << (list.empty() ? "" : ": " + list) << ")\n";
+        return 0;
+    } catch (const lic::InputError& e) {
+        if (common.json) {
+            out["ok"] = false;
+            out["error"] = e.what();
+            std::cout << out.dump(2) << "\n";
+        }
+        throw;
+    }
+}
+
 } // namespace
 
 int main(int argc, char** argv)
 {
+    // Layer 2 of the .vdb read defences: every read first runs in a child `licvdb info --check`.
+    if (!inReadChild()) vdbexport::setReadIsolation(selfExecutable());
+
     CLI::App app{"licvdb: 3D line integral convolution of vector fields, baked into OpenVDB volumes"};
     app.require_subcommand(1);
     app.set_version_flag("--version", std::string("licvdb ") + LICVDB_VERSION);
@@ -136,7 +191,7 @@ int main(int argc, char** argv)
     bake->add_option("-r,--recipe", recipePath, "JSON recipe; flags override its values");
     auto* oInput = bake->add_option("--input", cli.input.type, "Input texture: noise|spots [noise]");
     auto* oFilter = bake->add_option("--noise-filter", cli.input.noiseFilter, "Noise reconstruction: binomial|none [binomial]");
-    auto* oEngine = bake->add_option("--engine", cli.lic.engine, "naive|fast [fast]");
+    auto* oEngine = bake->add_option("--engine", cli.lic.engine, "auto|naive|fast|splat: auto = splat for spots, fast for noise [auto]");
     auto* oKernel = bake->add_option("--kernel", cli.lic.kernel, "box|exp (oriented streamlets, bright head downstream) [box]");
     auto* oDecay = bake->add_option("--decay", cli.lic.decay, "exp kernel: weight ratio of consecutive samples, (0,1) [0.9]");
     auto* oLength = bake->add_option("--length", cli.lic.length, "Kernel half-length, output voxels [20]");
@@ -205,10 +260,19 @@ int main(int argc, char** argv)
     // info -------------------------------------------------------------------------------------
     Common infoCommon;
     std::string infoPath;
+    bool infoCheck = false;
     CLI::App* info = app.add_subcommand("info", "List the grids, bounding boxes and metadata of a .vdb");
     info->add_option("file", infoPath, "A .vdb file")->required();
+    info->add_flag("--check", infoCheck,
+                   "Only check that the file is intact: exit 0 if it is, 2 with the reason if it is not");
     addCommon(info, infoCommon);
-    info->footer("Examples:\n  licvdb info jet_lic.vdb\n  licvdb info jet_lic.vdb --json | python3 -m json.tool\n");
+    info->footer("--check walks the file's whole structure (every size and offset it stores, every leaf\n"
+                 "buffer decoded), then reads every grid with OpenVDB in a child process, so a file that would\n"
+                 "crash or hang a reader is refused with exit 2 instead. Every licvdb command that reads a\n"
+                 ".vdb (bake, render, info) does the same first; see docs/inputs.md.\n\n"
+                 "Examples:\n  licvdb info jet_lic.vdb\n  licvdb info jet_lic.vdb --json | python3 -m json.tool\n"
+                 "  licvdb info --check download.vdb && echo intact\n"
+                 "  licvdb info --check download.vdb --json     # {\"ok\": false, \"error\": \"...\"} on stdout too\n");
 
     // render -----------------------------------------------------------------------------------
     Common renderCommon;
@@ -335,6 +399,7 @@ int main(int argc, char** argv)
 
         if (info->parsed()) {
             currentCommand = "licvdb info";
+            if (infoCheck) return checkCommand(infoPath, infoCommon);
             const nlohmann::json d = vdbexport::describeVdb(infoPath);
             std::cout << (infoCommon.json ? d.dump(2) + "\n" : vdbexport::formatInfo(d));
             return 0;

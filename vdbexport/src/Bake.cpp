@@ -127,8 +127,11 @@ openvdb::BBoxd bricksBox(const lic::BrickLayout& layout, const std::vector<std::
 // The pipeline of DESIGN.md, top to bottom; each stage lives in src/bake/. In a distributed bake
 // (mpirun) every rank runs it on its share of the bricks and rank 0 writes (bake/Distribute.h);
 // in one process every Job call below is a no-op.
-nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
+nlohmann::json bake(const Recipe& request, lic::Progress& progress)
 {
+    // The engine "auto" is resolved here, so the recipe a bake records names the engine it used.
+    Recipe recipe = request;
+    if (recipe.lic.engine == "auto") recipe.lic.engine = recipe.input.type == "spots" ? "splat" : "fast";
     using Clock = std::chrono::steady_clock;
     auto seconds = [](Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); };
     const auto t0 = Clock::now();
@@ -178,13 +181,13 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
         if (recipe.width) {
             ranges.width = recipe.width->range
                                ? *recipe.width->range
-                               : pipeline::autoRange(*scalars.get(recipe.width->scalar), domain, recipe.threads, blocks, reduce);
+                               : pipeline::autoRange(pipeline::ScalarField(scalars.get(recipe.width->scalar)), domain, recipe.threads, blocks, reduce);
         }
         if (recipe.color) {
             cmap = loadColormap(recipe.color->colormap);
             ranges.color = recipe.color->range
                                ? *recipe.color->range
-                               : pipeline::autoRange(*scalars.get(recipe.color->scalar), domain, recipe.threads, blocks, reduce);
+                               : pipeline::autoRange(pipeline::ScalarField(scalars.get(recipe.color->scalar)), domain, recipe.threads, blocks, reduce);
         }
     });
 
@@ -192,9 +195,7 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
     pipeline::Input input = job.stage("making the input texture", [&] {
         if (!job.distributed()) return pipeline::makeInput(plan, domain, scalars);
         pipeline::SpotShare spotShare;
-        double reach = lic::ghostMargin(plan.settings) + 2.0;
-        for (double r : recipe.input.radii) reach = std::max(reach, lic::ghostMargin(plan.settings) + r * recipe.input.haloScale + 2.0);
-        spotShare.reach = bricksBox(layout, share.mine, reach);
+        spotShare.reach = bricksBox(layout, share.mine, pipeline::spotReach(plan));
         spotShare.ownBlocks.assign(domain.blockCount(), false);
         for (std::uint32_t b : mineBlocks) spotShare.ownBlocks[b] = true;
         return pipeline::makeInput(plan, domain, scalars, &spotShare);
@@ -301,14 +302,12 @@ nlohmann::json bake(const Recipe& recipe, lic::Progress& progress)
             try {
                 job.injectFault("writing");
                 written = pipeline::writeFrames(plan, *compositor, densityMeta, progress, [&](int f, openvdb::GridPtrVec& grids) {
-                    guard.written(f - 1);
                     const std::string what = "composing frame " + std::to_string(f);
                     job.injectFault(what.c_str());
                     job.agree(nullptr, what.c_str());
                     gather(f, grids);
                     job.injectFault(("writing frame " + std::to_string(f)).c_str());
                 });
-                guard.written(plan.frames);
                 pipeline::writeManifest(plan, written, domain.voxelSize(), resolved, colorJson, spotsJson);
                 guard.disarm();
             } catch (...) {

@@ -624,7 +624,7 @@ Recipe loadRecipeFile(const std::string& path)
 const std::vector<std::string>& allowedValues(const std::string& keyPath)
 {
     static const std::map<std::string, std::vector<std::string>> table{
-        {"lic.engine", {"naive", "fast", "splat"}},
+        {"lic.engine", {"auto", "naive", "fast", "splat"}},
         {"lic.kernel", {"box", "exp"}},
         {"lic.integrator", {"rk4", "rk45"}},
         {"input.type", {"noise", "spots"}},

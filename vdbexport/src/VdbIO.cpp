@@ -1,4 +1,6 @@
 #include "vdbexport/VdbIO.h"
+#include "vdbexport/VdbCheck.h"
+#include "vdbexport/Sha256.h"
 
 #include <lic/Error.h>
 
@@ -13,9 +15,15 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <mutex>
+#include <set>
 #include <system_error>
+#include <tuple>
 
 #include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 namespace fs = std::filesystem;
@@ -90,111 +98,6 @@ typename DstGridT::Ptr convertGrid(const SrcGridT& src)
     auto dst = DstGridT::create(tree);
     copyGridAttributes(src, *dst);
     return dst;
-}
-
-/// Bounds-checked little reader over a file, for checkVdbLayout.
-class LayoutReader
-{
-public:
-    explicit LayoutReader(const std::string& path)
-        : mIn(path, std::ios::binary), mSize(static_cast<uint64_t>(fs::file_size(path)))
-    {}
-    uint64_t size() const { return mSize; }
-    uint64_t pos() const { return mPos; }
-    bool read(void* dst, uint64_t n)
-    {
-        if (n > mSize - mPos) return false;
-        mIn.read(static_cast<char*>(dst), static_cast<std::streamsize>(n));
-        mPos += n;
-        return bool(mIn);
-    }
-    template<typename T> bool read(T& value) { return read(&value, sizeof(T)); }
-    bool skip(uint64_t n)
-    {
-        if (n > mSize - mPos) return false;
-        mIn.seekg(static_cast<std::streamoff>(n), std::ios::cur);
-        mPos += n;
-        return bool(mIn);
-    }
-    bool seek(uint64_t p)
-    {
-        if (p > mSize) return false;
-        mIn.seekg(static_cast<std::streamoff>(p));
-        mPos = p;
-        return bool(mIn);
-    }
-    /// A length-prefixed string, as OpenVDB writes names and type names.
-    bool readString(std::string& s)
-    {
-        uint32_t n = 0;
-        if (!read(n) || n > mSize - mPos) return false;
-        s.resize(n);
-        return read(s.data(), n);
-    }
-
-private:
-    std::ifstream mIn;
-    uint64_t mSize;
-    uint64_t mPos = 0;
-};
-
-/// @brief Check a .vdb file's header and table of grids with bounds-checked reads, before
-///        OpenVDB parses it: OpenVDB reads a grid cut short at the end of the file without
-///        complaint, and trusts string lengths read from a damaged header (allocating gigabytes).
-/// Files this does not understand (other format versions, streamed files without grid offsets)
-/// are left to OpenVDB.
-/// @throw lic::InputError naming `path` if it is not a VDB file or is truncated.
-void checkVdbLayout(const std::string& path)
-{
-    LayoutReader in(path);
-    const auto truncated = [&](const std::string& what) {
-        return lic::InputError(quote(path) + " is truncated or corrupt: " + what + " (the file has "
-                               + std::to_string(in.size()) + " bytes); expected an intact OpenVDB .vdb file");
-    };
-    int64_t magic = 0;
-    const int64_t expectedMagic = openvdb::OPENVDB_MAGIC;
-    if (in.size() < sizeof(magic)) {
-        // A few bytes that begin like a VDB file are a truncated one.
-        std::string head(in.size(), '\0');
-        in.read(head.data(), head.size());
-        if (!head.empty() && std::memcmp(head.data(), &expectedMagic, head.size()) == 0)
-            throw truncated("its header is cut short");
-    }
-    if (!in.read(magic) || magic != expectedMagic)
-        throw lic::InputError(quote(path) + " is not an OpenVDB file (no VDB header); expected a .vdb file");
-    uint32_t fileVersion = 0, libMajor = 0, libMinor = 0;
-    char hasGridOffsets = 0;
-    if (!in.read(fileVersion) || !in.read(libMajor) || !in.read(libMinor) || !in.read(hasGridOffsets))
-        throw truncated("its header is cut short");
-    if (fileVersion < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION
-        || fileVersion > openvdb::OPENVDB_FILE_VERSION)
-        return; // a layout we do not parse: OpenVDB reports what it thinks of it
-    if (!in.skip(36)) throw truncated("its header is cut short"); // UUID
-    int32_t metaCount = 0;
-    if (!in.read(metaCount) || metaCount < 0) throw truncated("its file metadata is cut short");
-    for (int32_t i = 0; i < metaCount; ++i) {
-        std::string name, type;
-        uint32_t bytes = 0;
-        if (!in.readString(name) || !in.readString(type) || !in.read(bytes) || !in.skip(bytes))
-            throw truncated("its file metadata is cut short");
-    }
-    int32_t gridCount = 0;
-    if (!in.read(gridCount) || gridCount < 0) throw truncated("its table of grids is cut short");
-    if (!hasGridOffsets) return; // grids follow inline; OpenVDB reads them all on open
-    for (int32_t i = 0; i < gridCount; ++i) {
-        std::string uniqueName, type, instanceParent;
-        int64_t gridPos = 0, blockPos = 0, endPos = 0;
-        if (!in.readString(uniqueName) || !in.readString(type) || !in.readString(instanceParent)
-            || !in.read(gridPos) || !in.read(blockPos) || !in.read(endPos))
-            throw truncated("the header of grid #" + std::to_string(i + 1) + " is cut short");
-        const std::string name = quote(openvdb::io::GridDescriptor::nameAsString(uniqueName));
-        if (endPos > static_cast<int64_t>(in.size()))
-            throw truncated("grid " + name + " should end at byte " + std::to_string(endPos));
-        if (gridPos < static_cast<int64_t>(in.pos()) || blockPos < gridPos || endPos < blockPos)
-            throw truncated("grid " + name + " has inconsistent offsets");
-        if (!in.seek(static_cast<uint64_t>(endPos)))
-            throw truncated("grid " + name + " should end at byte " + std::to_string(endPos));
-    }
 }
 
 /// An exception message fit to quote: control characters and runs of blanks collapsed (OpenVDB
@@ -305,7 +208,7 @@ VdbReader::VdbReader(std::string path) : mPath(std::move(path))
         throw lic::InputError("cannot open " + quote(mPath) + " for reading (" + std::strerror(errno)
                               + "); expected a readable .vdb file");
     try {
-        checkVdbLayout(mPath);
+        mCheck = checkedVdb(mPath);
     } catch (const lic::Error&) {
         throw;
     } catch (const std::exception& e) {
@@ -346,6 +249,10 @@ openvdb::GridBase::Ptr VdbReader::readGrid(const std::string& name)
 {
     const std::string what = "reading grid " + quote(name);
     return guardRead(mPath, what.c_str(), [&] {
+        for (const auto& g : mCheck.grids)
+            if (g.name == name && !g.skipReason.empty())
+                throw lic::InputError("grid " + quote(name) + " in " + quote(mPath) + " (" + g.gridType
+                                      + ") cannot be read: " + g.skipReason);
         if (!mFile->hasGrid(name))
             throw lic::InputError("grid " + quote(name) + " not found in " + quote(mPath)
                                   + "; the file has: " + listGrids(gridTypes()));
@@ -358,8 +265,16 @@ openvdb::GridBase::Ptr VdbReader::readGrid(const std::string& name)
 openvdb::GridPtrVec VdbReader::readAllGrids()
 {
     return guardRead(mPath, "reading grids", [&] {
-        const auto grids = mFile->getGrids();
-        return grids ? *grids : openvdb::GridPtrVec{};
+        const bool skipped = std::any_of(mCheck.grids.begin(), mCheck.grids.end(),
+                                         [](const VdbGridCheck& g) { return !g.skipReason.empty(); });
+        if (!skipped) {
+            const auto grids = mFile->getGrids();
+            return grids ? *grids : openvdb::GridPtrVec{};
+        }
+        openvdb::GridPtrVec grids; // grids of types licvdb does not read are left out
+        for (const auto& g : mCheck.grids)
+            if (g.skipReason.empty()) grids.push_back(mFile->readGrid(g.name));
+        return grids;
     });
 }
 
@@ -369,6 +284,58 @@ openvdb::MetaMap::Ptr VdbReader::fileMetadata()
         auto meta = mFile->getMetadata();
         return meta ? meta : std::make_shared<openvdb::MetaMap>();
     });
+}
+
+namespace {
+
+/// Files that passed checkedVdb, keyed by what identifies an unchanged file.
+struct FileKey
+{
+    dev_t dev;
+    ino_t ino;
+    off_t size;
+    int64_t mtimeNs;
+    bool operator<(const FileKey& o) const
+    {
+        return std::tie(dev, ino, size, mtimeNs) < std::tie(o.dev, o.ino, o.size, o.mtimeNs);
+    }
+};
+
+std::mutex sCheckedMutex;
+std::map<FileKey, VdbCheckResult> sChecked;
+
+bool fileKey(const std::string& path, FileKey& key)
+{
+    struct stat st{};
+    if (::stat(path.c_str(), &st) != 0) return false;
+    key = {st.st_dev, st.st_ino, st.st_size, int64_t(st.st_mtim.tv_sec) * 1000000000 + st.st_mtim.tv_nsec};
+    return true;
+}
+
+} // namespace
+
+VdbCheckResult checkedVdb(const std::string& path)
+{
+    FileKey before{};
+    const bool known = fileKey(path, before);
+    if (known) {
+        const std::lock_guard<std::mutex> lock(sCheckedMutex);
+        if (const auto it = sChecked.find(before); it != sChecked.end()) return it->second;
+    }
+    VdbCheckResult result = checkVdbStructure(path);
+    checkInIsolatedProcess(path);
+    FileKey after{};
+    if (known && fileKey(path, after) && !(before < after) && !(after < before)) {
+        const std::lock_guard<std::mutex> lock(sCheckedMutex);
+        sChecked[after] = result;
+    }
+    return result;
+}
+
+void clearCheckedVdbCache()
+{
+    const std::lock_guard<std::mutex> lock(sCheckedMutex);
+    sChecked.clear();
 }
 
 std::string listGrids(const std::vector<std::pair<std::string, std::string>>& grids)
@@ -553,11 +520,69 @@ std::map<std::string, openvdb::FloatGrid::Ptr> readScalarGrids(const std::string
 // ------------------------------------------------------------------------------------------
 // writing
 
-void writeVdbAtomic(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)
+// ---- OutputSet ---------------------------------------------------------------------------
+
+namespace {
+
+std::string fdPath(int fd) { return "/proc/self/fd/" + std::to_string(fd); }
+
+} // namespace
+
+OutputSet::~OutputSet()
+{
+    for (auto& f : mFiles) discard(f);
+}
+
+void OutputSet::discard(Staged& f)
+{
+    if (f.fd >= 0) ::close(f.fd);
+    f.fd = -1;
+    if (!f.named.empty()) {
+        std::error_code ec;
+        fs::remove(f.named, ec);
+        f.named.clear();
+    }
+}
+
+OutputSet::Staged OutputSet::stage(const std::string& path)
+{
+    for (const auto& f : mFiles)
+        if (f.path == path) throw lic::Error("cannot write " + quote(path) + " twice in one output set");
+    Staged f;
+    f.path = path;
+    const std::string named = detail::prepareAtomicWrite(path);
+    fs::path dir = fs::path(path).parent_path();
+    if (dir.empty()) dir = ".";
+    // An unnamed file in the target directory: a process killed before commit() leaves nothing.
+    f.fd = ::open(dir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0666);
+    if (f.fd < 0) f.named = named; // no O_TMPFILE on this file system: a named temporary
+    return f;
+}
+
+std::string OutputSet::target(const Staged& f) { return f.fd >= 0 ? fdPath(f.fd) : f.named; }
+
+void OutputSet::finish(Staged& f)
+{
+    const int fd = f.fd >= 0 ? f.fd : ::open(f.named.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0 || ::fsync(fd) != 0) {
+        const std::string reason = std::strerror(errno);
+        if (fd >= 0 && fd != f.fd) ::close(fd);
+        throw lic::Error("cannot write " + quote(f.path) + ": flushing it failed (" + reason + ")");
+    }
+    try {
+        f.sha256 = sha256OfFd(fd);
+    } catch (...) {
+        if (fd != f.fd) ::close(fd);
+        throw;
+    }
+    if (fd != f.fd) ::close(fd);
+}
+
+void OutputSet::addVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)
 {
     openvdb::initialize();
-    const std::string tmp = detail::prepareAtomicWrite(path);
-    std::error_code ec;
+    Staged f = stage(path);
+    const std::string tmp = target(f);
     try {
         for (std::size_t i = 0; i < grids.size(); ++i) {
             if (!grids[i])
@@ -575,9 +600,9 @@ void writeVdbAtomic(const std::string& path, openvdb::GridPtrVec grids, const op
             file.close();
         }
         // io::File does not report stream errors after opening (e.g. a full disk): check the
-        // layout of what was written and read the headers back.
+        // structure of what was written and read the headers back.
         try {
-            checkVdbLayout(tmp);
+            checkVdbStructure(tmp);
         } catch (const lic::InputError& e) {
             throw lic::Error("cannot write " + quote(path) + ": the file written is incomplete (disk full?): "
                              + e.what());
@@ -590,33 +615,105 @@ void writeVdbAtomic(const std::string& path, openvdb::GridPtrVec grids, const op
             throw lic::Error("cannot write " + quote(path) + ": only "
                              + std::to_string(written ? written->size() : 0) + " of "
                              + std::to_string(grids.size()) + " grids could be read back");
+        finish(f);
     } catch (const lic::Error&) {
-        fs::remove(tmp, ec);
+        discard(f);
         throw;
     } catch (const std::exception& e) {
-        fs::remove(tmp, ec);
-        throw lic::Error("cannot write " + quote(path) + " (via " + quote(tmp) + "): " + e.what());
+        discard(f);
+        throw lic::Error("cannot write " + quote(path) + ": " + e.what());
     }
-    detail::commitAtomicWrite(tmp, path);
+    mFiles.push_back(std::move(f));
+}
+
+void OutputSet::addText(const std::string& path, const std::string& text)
+{
+    Staged f = stage(path);
+    try {
+        std::ofstream out(target(f), std::ios::binary | std::ios::trunc);
+        if (out) out.write(text.data(), static_cast<std::streamsize>(text.size()));
+        if (out) out.flush();
+        if (!out) throw lic::Error("cannot write " + quote(path) + " (" + std::strerror(errno) + ")");
+        out.close();
+        finish(f);
+    } catch (...) {
+        discard(f);
+        throw;
+    }
+    mFiles.push_back(std::move(f));
+}
+
+std::string OutputSet::sha256(const std::string& path) const
+{
+    for (const auto& f : mFiles)
+        if (f.path == path) return f.sha256;
+    throw lic::Error("no file " + quote(path) + " in this output set");
+}
+
+void OutputSet::commit()
+{
+    // One exclusive lock per target directory, taken in a fixed order, held while the files
+    // are renamed into place: two bakes committing to the same place cannot interleave.
+    std::set<std::string> dirs;
+    for (const auto& f : mFiles) {
+        const fs::path d = fs::path(f.path).parent_path();
+        dirs.insert(d.empty() ? "." : d.string());
+    }
+    std::vector<int> locks;
+    const auto unlock = [&] {
+        for (const int fd : locks) ::close(fd); // closing releases the flock
+        locks.clear();
+    };
+    for (const auto& d : dirs) {
+        const int fd = ::open(d.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+        if (fd < 0) continue;
+        while (::flock(fd, LOCK_EX) != 0 && errno == EINTR) {}
+        locks.push_back(fd); // a file system without flock: commit unlocked (the checksums still tell)
+    }
+    try {
+        int n = 0;
+        for (auto& f : mFiles) {
+            std::error_code ec;
+            if (f.fd >= 0) {
+                const std::string link = f.path + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(n++);
+                fs::remove(link, ec);
+                if (::linkat(AT_FDCWD, fdPath(f.fd).c_str(), AT_FDCWD, link.c_str(), AT_SYMLINK_FOLLOW) != 0)
+                    throw lic::Error("cannot write " + quote(f.path) + ": linking its data failed (" + std::strerror(errno) + ")");
+                fs::rename(link, f.path, ec);
+                if (ec) {
+                    std::error_code ec2;
+                    fs::remove(link, ec2);
+                    throw lic::Error("cannot write " + quote(f.path) + ": renaming failed (" + ec.message() + ")");
+                }
+                ::close(f.fd);
+                f.fd = -1;
+            } else {
+                fs::rename(f.named, f.path, ec);
+                if (ec) throw lic::Error("cannot write " + quote(f.path) + ": renaming " + quote(f.named) + " failed (" + ec.message() + ")");
+                f.named.clear();
+            }
+        }
+    } catch (...) {
+        unlock();
+        throw;
+    }
+    for (const int fd : locks) ::fsync(fd); // the renames themselves
+    unlock();
+    mFiles.clear();
+}
+
+void writeVdbAtomic(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)
+{
+    OutputSet out;
+    out.addVdb(path, std::move(grids), fileMetadata);
+    out.commit();
 }
 
 void writeTextAtomic(const std::string& path, const std::string& text)
 {
-    const std::string tmp = detail::prepareAtomicWrite(path);
-    std::error_code ec;
-    {
-        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-        if (out) out.write(text.data(), static_cast<std::streamsize>(text.size()));
-        if (out) out.flush();
-        if (!out) {
-            const std::string reason = std::strerror(errno);
-            out.close();
-            fs::remove(tmp, ec);
-            throw lic::Error("cannot write " + quote(path) + ": writing " + quote(tmp) + " failed ("
-                             + reason + ")");
-        }
-    }
-    detail::commitAtomicWrite(tmp, path);
+    OutputSet out;
+    out.addText(path, text);
+    out.commit();
 }
 
 } // namespace vdbexport

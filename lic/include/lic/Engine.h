@@ -24,10 +24,11 @@ namespace lic {
 
 enum class EngineType {
     Naive, ///< every voxel gathers along its own streamline (the reference)
-    Fast   ///< Stalling–Hege fast-LIC: long streamlines deposit into every voxel they cross
+    Fast,  ///< Stalling–Hege fast-LIC: long streamlines deposit into every voxel they cross
+    Splat  ///< spots only: one streamline per spot, its footprint deposited around it (SplatLic.h)
 };
 const char* toString(EngineType);
-/// @throw lic::InputError for names other than "naive" and "fast".
+/// @throw lic::InputError for names other than "naive", "fast" and "splat".
 EngineType engineFromString(const std::string&);
 
 enum class KernelType {
@@ -100,6 +101,8 @@ struct BrickChannels
     const Brick* brick = nullptr;
     int channels = 0;
     const float* values = nullptr;
+    /// Splat: per block, 0 when no spot reached it (its values are then not set); null = all set.
+    const std::uint8_t* blockTouched = nullptr;
     const float* block(std::size_t i, int c) const
     {
         return values + (i * std::size_t(channels) + std::size_t(c)) * OutputDomain::kBlockVoxels;
@@ -178,6 +181,10 @@ LicStats convolveBricks(const VelocityField& field, const OutputDomain& domain, 
     using Texture = std::remove_cvref_t<decltype(textureFor(std::declval<const Brick&>()))>;
     constexpr int C = Texture::kChannels;
     settings.validate();
+    if (settings.engine == EngineType::Splat) {
+        throw InputError("engine \"splat\" deposits spot footprints: it needs spot input (input.type \"spots\"); "
+                         "use engine fast or naive for noise");
+    }
     const auto start = std::chrono::steady_clock::now();
     const bool fast = settings.engine == EngineType::Fast;
     const int K = settings.ripple ? 3 * C + 2 : C;
@@ -195,7 +202,7 @@ LicStats convolveBricks(const VelocityField& field, const OutputDomain& domain, 
             if (settings.ripple) naiveLicBrick<Texture, true>(field, domain, brick, texture, settings, w.out, w.stats, progress);
             else naiveLicBrick<Texture, false>(field, domain, brick, texture, settings, w.out, w.stats, progress);
         }
-        sink(BrickChannels{brick.id, &brick, K, w.out.data()});
+        sink(BrickChannels{brick.id, &brick, K, w.out.data(), nullptr});
     };
 
     progress.begin(fast ? "fast LIC" : "naive LIC", domain.activeVoxelCount());
@@ -241,6 +248,7 @@ LicResult convolve(const VelocityField& field, const OutputDomain& domain, const
         field, domain, layout, [&](const Brick&) -> const Texture& { return texture; }, settings, progress,
         [&](const BrickChannels& bc) {
             for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i) {
+                if (bc.blockTouched && !bc.blockTouched[i]) continue;
                 const std::size_t slot0 = std::size_t(bc.brick->blocks[i]) * OutputDomain::kBlockVoxels;
                 for (int c = 0; c < K; ++c)
                     std::copy_n(bc.block(i, c), OutputDomain::kBlockVoxels, result.channels[std::size_t(c)].begin() + std::ptrdiff_t(slot0));

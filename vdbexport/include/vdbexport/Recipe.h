@@ -100,7 +100,9 @@ struct RoiSpec
 /// The convolution (JSON `lic`).
 struct LicSpec
 {
-    std::string engine = "fast";     ///< `engine`: "naive" | "fast" | "splat"
+    /// `engine`: "auto" (splat for spots, fast for noise) | "naive" | "fast" | "splat"; a bake
+    /// records the engine it used
+    std::string engine = "auto";
     std::string kernel = "box";      ///< `kernel`: "box" | "exp"
     double length = 20;              ///< `length`: kernel half-length (one direction), output voxels, (0, 10000]
     double step = 0.5;               ///< `step`: sample spacing along the streamline, output voxels, (0, length]

@@ -5,6 +5,8 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/io/File.h>
 
+#include "vdbexport/VdbCheck.h"
+
 #include <map>
 #include <memory>
 #include <string>
@@ -36,8 +38,9 @@ openvdb::Vec3SGrid::Ptr readVelocityGrid(const std::string& path, const std::str
 /// @throw lic::InputError for a missing, empty, corrupt or truncated file (see readVelocityGrid).
 std::map<std::string, openvdb::FloatGrid::Ptr> readScalarGrids(const std::string& path);
 
-/// @brief Write grids to `path` atomically: write `path` + ".tmp-<pid>" in the same directory,
-///        then rename it over `path`, so readers never see a partial file.
+/// @brief Write grids to `path` atomically: write an unnamed temporary file in the same directory
+///        (a named `path` + ".tmp-<pid>" where the file system has no O_TMPFILE), then link and
+///        rename it over `path` (an OutputSet of one file), so readers never see a partial file.
 ///
 /// Grids with active tiles are written as copies whose tiles are voxelized (Blender 3.4 renders
 /// tiles as empty); the caller's grids are not modified.
@@ -50,6 +53,49 @@ void writeVdbAtomic(const std::string& path, openvdb::GridPtrVec grids,
 /// @brief Write a text file (e.g. the JSON sidecar manifest) with the same temporary-name +
 ///        rename scheme and the same exceptions as writeVdbAtomic.
 void writeTextAtomic(const std::string& path, const std::string& text);
+
+/// @brief Output files staged out of sight and made visible together (a bake's frames and its
+///        manifest).
+///
+/// Each add*() writes a complete, checked file to an unnamed temporary file in the target's
+/// directory (O_TMPFILE; a named `PATH.tmp-<pid>` where the file system lacks it) and records its
+/// SHA-256. commit() takes an exclusive flock on each target directory, then links and renames
+/// every file into place in the order added: two processes committing to the same paths never
+/// interleave, so the last commit wins whole. A process killed before commit() leaves no file,
+/// temporary or final; the destructor discards whatever was not committed.
+class OutputSet
+{
+public:
+    OutputSet() = default;
+    ~OutputSet();
+    OutputSet(const OutputSet&) = delete;
+    OutputSet& operator=(const OutputSet&) = delete;
+
+    /// Stage grids for `path`, as writeVdbAtomic writes them (active tiles voxelized on copies,
+    /// structure checked after writing). @throw as writeVdbAtomic.
+    void addVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata = {});
+    /// Stage a text file for `path`. @throw as writeTextAtomic.
+    void addText(const std::string& path, const std::string& text);
+    /// SHA-256 (64 hex digits) of the bytes staged for `path`. @throw lic::Error if none.
+    std::string sha256(const std::string& path) const;
+    /// Move every staged file into place (see the class comment).
+    /// @throw lic::Error if a link or rename fails; files committed before it stay.
+    void commit();
+
+private:
+    struct Staged
+    {
+        std::string path;
+        int fd = -1;       ///< the unnamed temporary file
+        std::string named; ///< or a named temporary
+        std::string sha256;
+    };
+    Staged stage(const std::string& path);
+    static std::string target(const Staged& f);
+    static void finish(Staged& f);
+    static void discard(Staged& f);
+    std::vector<Staged> mFiles;
+};
 
 namespace detail {
 
@@ -66,9 +112,12 @@ void commitAtomicWrite(const std::string& tmp, const std::string& path);
 ///        that names the file. Shared by readVelocityGrid, readScalarGrids and describeVdb.
 ///
 /// The constructor checks that the path exists, is readable, is not a directory and is not
-/// empty; then reads the file header and table of grids with bounds-checked reads (so a file cut
-/// short anywhere, even one byte before its end, is reported as truncated: OpenVDB alone reads
-/// a shortened last grid without complaint); then opens it with OpenVDB, without delayed loading.
+/// empty; then checks the whole file's structure (checkVdbStructure: layer 1) and, when an
+/// executable is set (setReadIsolation), has a child process read it (checkInIsolatedProcess:
+/// layer 2); both results are remembered for the file's (device, inode, size, mtime), so reading
+/// the same unchanged file again in this process does not repeat them. Only then does OpenVDB
+/// open it, without delayed loading. Every read path (fields, scalars, info, render) goes
+/// through here.
 class VdbReader
 {
 public:
@@ -90,11 +139,23 @@ public:
     openvdb::GridPtrVec readAllGrids();
     /// The file-level metadata. @throw lic::InputError if unreadable.
     openvdb::MetaMap::Ptr fileMetadata();
+    /// What the structural check found (grids of types licvdb does not read have a skipReason;
+    /// readAllGrids leaves them out and readGrid refuses them).
+    const VdbCheckResult& check() const { return mCheck; }
 
 private:
     std::string mPath;
+    VdbCheckResult mCheck;
     std::unique_ptr<openvdb::io::File> mFile;
 };
+
+/// @brief checkVdbStructure(path) then checkInIsolatedProcess(path), each done once per unchanged
+///        file (same device, inode, size and modification time) in this process.
+/// @throw lic::InputError as those do.
+VdbCheckResult checkedVdb(const std::string& path);
+
+/// Forget the files checkedVdb has passed (tests).
+void clearCheckedVdbCache();
 
 /// "density (float), vel (vec3s)" — for error messages; "no grids" when empty.
 std::string listGrids(const std::vector<std::pair<std::string, std::string>>& grids);

@@ -60,9 +60,9 @@ Compositor::Compositor(const Plan& plan, const lic::VelocityField& field, const 
 {
     const Recipe& r = plan.recipe;
     const std::size_t blocks = domain.blockCount();
-    if (r.width) mWidthGrid = ScalarSource(scalars.get(r.width->scalar));
-    if (plan.roiPost) mRoiGrid = ScalarSource(scalars.get(r.roi->scalar));
-    if (r.color) mColorGrid = ScalarSource(scalars.get(r.color->scalar));
+    if (r.width) mWidthGrid = ScalarField(scalars.get(r.width->scalar));
+    if (plan.roiPost) mRoiGrid = ScalarField(scalars.get(r.roi->scalar));
+    if (r.color) mColorGrid = ScalarField(scalars.get(r.color->scalar));
     const bool keepRaw = !plan.spots || plan.frames > 1;
     if (keepRaw) {
         mRawLeaves.resize(std::size_t(plan.rawChannels));
@@ -126,15 +126,12 @@ Compositor::SpotVoxel Compositor::composeSpots(const Raw& raw, float widthT, flo
 void Compositor::consume(const lic::BrickChannels& bc)
 {
     Moments moments;
-    Probes probes;
-    if (mWidthGrid) probes.width.emplace(mWidthGrid.probe());
-    if (mRoiGrid) probes.roi.emplace(mRoiGrid.probe());
-    if (mColorGrid) probes.color.emplace(mColorGrid.probe());
-    for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i) consumeBlock(bc, i, probes, moments);
+    for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i)
+        if (!bc.blockTouched || bc.blockTouched[i]) consumeBlock(bc, i, moments);
     mMoments[bc.index] = moments;
 }
 
-void Compositor::consumeBlock(const lic::BrickChannels& bc, std::size_t i, Probes& probes, Moments& moments)
+void Compositor::consumeBlock(const lic::BrickChannels& bc, std::size_t i, Moments& moments)
 {
     constexpr std::size_t V = lic::OutputDomain::kBlockVoxels;
     const Recipe& r = mPlan.recipe;
@@ -150,13 +147,13 @@ void Compositor::consumeBlock(const lic::BrickChannels& bc, std::size_t i, Probe
         const openvdb::Vec3d world = mDomain.worldOf(ijk);
         auto raw = [&](int c) { return bc.block(i, c)[off]; };
         float widthT = 0.0f;
-        if (probes.width) {
-            const double t = std::clamp((double(probes.width->at(world)) - mRanges.width[0]) /
+        if (mWidthGrid) {
+            const double t = std::clamp((double(mWidthGrid.at(world)) - mRanges.width[0]) /
                                             (mRanges.width[1] - mRanges.width[0]),
                                         0.0, 1.0);
             widthT = float(r.width->invert ? 1.0 - t : t);
         }
-        const float roi = probes.roi ? lic::roiWeight(probes.roi->at(world), r.roi->range[0], r.roi->range[1]) : 1.0f;
+        const float roi = mRoiGrid ? lic::roiWeight(mRoiGrid.at(world), r.roi->range[0], r.roi->range[1]) : 1.0f;
 
         bool keep = true;
         if (mPlan.spots) {
@@ -224,8 +221,8 @@ void Compositor::consumeBlock(const lic::BrickChannels& bc, std::size_t i, Probe
             }
             leafOf(mTangentLeaves, b, origin).setValueOn(openvdb::Index(off), t);
         }
-        if (probes.color) {
-            const double t = std::clamp((double(probes.color->at(world)) - mRanges.color[0]) /
+        if (mColorGrid) {
+            const double t = std::clamp((double(mColorGrid.at(world)) - mRanges.color[0]) /
                                             (mRanges.color[1] - mRanges.color[0]),
                                         0.0, 1.0);
             leafOf(mScalarLeaves, b, origin).setValueOn(openvdb::Index(off), float(t));

@@ -111,12 +111,7 @@ private:
     /// times the ROI post-mask. `raw(c)` gives texture channel c's convolved value.
     template<typename Raw>
     SpotVoxel composeSpots(const Raw& raw, float widthT, float roi) const;
-    /// Per-thread probes of the scalars a brick samples at voxel centres.
-    struct Probes
-    {
-        std::optional<ScalarProbe> width, roi, color;
-    };
-    void consumeBlock(const lic::BrickChannels& bc, std::size_t i, Probes& probes, Moments& moments);
+    void consumeBlock(const lic::BrickChannels& bc, std::size_t i, Moments& moments);
 
     const Plan& mPlan;
     const lic::VelocityField& mField;
@@ -125,7 +120,7 @@ private:
     Input& mInput;
     const lic::Colormap* mColormap;
     Ranges mRanges;
-    ScalarSource mWidthGrid, mRoiGrid, mColorGrid;
+    ScalarField mWidthGrid, mRoiGrid, mColorGrid;
     std::optional<lic::SpotTexture<1>> mInputSpots; // write_input of a spot bake
 
     // Per-voxel data kept until the frames are written.

@@ -408,16 +408,14 @@ void Job::injectFault(const char* what) const
 
 namespace {
 
-std::vector<std::string> gGuardFrames, gGuardTemps; // prepared before the handler is installed
-volatile std::sig_atomic_t gGuardArmed = 0, gGuardWritten = 0;
+std::vector<std::string> gGuardTemps; // prepared before the handler is installed
+volatile std::sig_atomic_t gGuardArmed = 0;
 struct sigaction gGuardPrevious;
 
 extern "C" void onTerminate(int sig)
 {
-    if (gGuardArmed) {
+    if (gGuardArmed)
         for (const std::string& t : gGuardTemps) ::unlink(t.c_str());
-        for (int i = 0; i < gGuardWritten && i < int(gGuardFrames.size()); ++i) ::unlink(gGuardFrames[std::size_t(i)].c_str());
-    }
     ::signal(sig, SIG_DFL);
     ::raise(sig);
 }
@@ -426,12 +424,10 @@ extern "C" void onTerminate(int sig)
 
 WriteGuard::WriteGuard(const std::vector<std::string>& frames, const std::string& manifest)
 {
-    gGuardFrames = frames;
     gGuardTemps.clear();
     const std::string suffix = ".tmp-" + std::to_string(::getpid());
     for (const std::string& f : frames) gGuardTemps.push_back(f + suffix);
     gGuardTemps.push_back(manifest + suffix);
-    gGuardWritten = 0;
     gGuardArmed = 1;
     struct sigaction sa {};
     sa.sa_handler = onTerminate;
@@ -444,8 +440,6 @@ WriteGuard::~WriteGuard()
     gGuardArmed = 0;
     ::sigaction(SIGTERM, &gGuardPrevious, nullptr);
 }
-
-void WriteGuard::written(int n) { gGuardWritten = n; }
 
 void WriteGuard::disarm() { gGuardArmed = 0; }
 

@@ -87,10 +87,11 @@ private:
 };
 
 /// While armed, SIGTERM (what mpirun sends every rank when one of them dies or the job is
-/// cancelled) makes rank 0 remove the frames it already wrote and the temporary files of the one
-/// it is writing (PATH.tmp-PID, as writeVdbAtomic names them), then die of the signal: a job
-/// killed while rank 0 writes leaves no partial sequence. Only async-signal-safe calls run in the
-/// handler (unlink on names prepared in advance).
+/// cancelled) makes rank 0 remove the named temporaries of the files it is staging
+/// (PATH.tmp-PID, where the file system has no O_TMPFILE; see vdbexport::OutputSet), then die
+/// of the signal. Staged files are unnamed until the manifest commits them all together, so a
+/// job killed before that leaves no file, old outputs untouched. Only async-signal-safe calls
+/// run in the handler (unlink on names prepared in advance).
 class WriteGuard
 {
 public:
@@ -99,8 +100,6 @@ public:
     ~WriteGuard(); ///< restores the previous SIGTERM handler
     WriteGuard(const WriteGuard&) = delete;
     WriteGuard& operator=(const WriteGuard&) = delete;
-    /// Frames 1 … `n` are in place (a later signal removes them).
-    void written(int n);
     /// The bake is complete: a signal now removes nothing.
     void disarm();
 };

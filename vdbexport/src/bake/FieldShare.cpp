@@ -119,6 +119,17 @@ void readPart(const Plan& plan, int rank, int ranks, const std::string& velName,
 {
     const Recipe& r = plan.recipe;
     const std::string& path = r.field.path;
+    // The same read defences as every other read (docs/inputs.md): the whole file's structure
+    // checked, then read once in a child process, before OpenVDB opens it here (remembered for the
+    // unchanged file: wholeReadReason() already did it through a VdbReader). Grids of types
+    // licvdb does not read are never touched.
+    const VdbCheckResult check = detail::checkedVdb(path);
+    auto unreadable = [&](const std::string& name) {
+        for (const auto& g : check.grids)
+            if (g.name == name && !g.skipReason.empty()) return true;
+        return false;
+    };
+    if (unreadable(velName)) throw lic::InputError("grid " + detail::q(velName) + " in " + detail::q(path) + " cannot be read");
     openvdb::io::File file(path);
     try {
         file.open(/*delayLoad=*/true);
@@ -177,7 +188,7 @@ void readPart(const Plan& plan, int rank, int ranks, const std::string& velName,
     if (!vel) throw lic::InputError("grid " + detail::q(velName) + " in " + detail::q(path) + " could not be read");
     vel->tree().clip(region);
     vel->setGridClass(gridClass);
-    setWholeActiveBox(*vel, box);
+    setPartOf(*vel, box, region);
     s.extent.maxSpeed = localMaxSpeed(*vel);
     s.loaded.velocity = vel;
     s.loaded.gridName = velName;
@@ -188,6 +199,7 @@ void readPart(const Plan& plan, int rank, int ranks, const std::string& velName,
     for (const auto& meta : *metas) {
         if (meta->valueType() != kFloat) continue;
         const std::string name = meta->getName();
+        if (unreadable(name)) continue;
         auto whole = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(name)); // topology (delayed)
         const openvdb::CoordBBox wholeBox = whole->evalActiveVoxelBoundingBox();
         const openvdb::math::Transform::Ptr sx = whole->transform().copy();
@@ -196,13 +208,28 @@ void readPart(const Plan& plan, int rank, int ranks, const std::string& velName,
         auto g = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(name, worldBoxOf(*sx, part.expandBy(1))));
         if (!g) continue;
         g->tree().clip(part);
-        setWholeActiveBox(*g, wholeBox);
+        setPartOf(*g, wholeBox, part);
         s.loaded.scalars.emplace(name, std::move(g));
     }
     file.close();
 }
 
 } // namespace
+
+double spotReach(const Plan& plan)
+{
+    const lic::LicSettings& st = plan.settings;
+    const Recipe& r = plan.recipe;
+    double R = 0.0; // the largest spot (halo) radius, with the profile's soft edge
+    for (double rad : r.input.radii) R = std::max(R, rad * r.input.haloScale);
+    R += 0.5;
+    const double ghost = double(lic::ghostMargin(st));
+    if (st.engine != lic::EngineType::Splat) return ghost + R + 2.0; // a voxel's window meets the spot
+    // Splat: the spot's own line runs n·h + R (+ a sample) each way, and deposits within
+    // √(R² + slab²) of its coarse samples (lic/src/SplatLic.cpp).
+    const double slab = 2.0 * st.step + 0.5;
+    return ghost + R + 1.0 + st.step + std::sqrt(R * R + slab * slab) + 1.25;
+}
 
 int fieldMargin(const Plan& plan, int upsample, int stride)
 {
@@ -211,8 +238,16 @@ int fieldMargin(const Plan& plan, int upsample, int stride)
     // Output voxels past the brick: the ghost margin (the last texture sample, with its rounding
     // and footprint), one integration step past the last sample (RK4 every `stride` samples,
     // RK45 at most 2 voxels or a step), a voxel of rounding.
-    double out = double(lic::ghostMargin(st)) + std::max({double(stride) * st.step, 2.0, st.step}) + 1.0;
-    if (plan.spots) { // spots whose weights a brick's texture reads (ROI pre-mask at their centres)
+    const double integration = std::max({double(stride) * st.step, 2.0, st.step}) + 1.0;
+    double out = double(lic::ghostMargin(st)) + integration;
+    if (plan.spots && st.engine == lic::EngineType::Splat) {
+        // Splat: every spot within spotReach() is traced over its whole support (n·h + R each
+        // way) from its centre, and the flow map carried along it needs derivatives: its whole
+        // line must see the whole field's values, or its window would be cut elsewhere.
+        double R = 0.0;
+        for (double rad : r.input.radii) R = std::max(R, rad * r.input.haloScale);
+        out = spotReach(plan) + double(lic::ghostMargin(st)) + R + 0.5 + st.step + integration + 2.0;
+    } else if (plan.spots) { // spots whose weights a brick's texture reads (ROI pre-mask at their centres)
         double reach = 0.0;
         for (double rad : r.input.radii) reach = std::max(reach, rad * r.input.haloScale);
         out += reach + 1.5;

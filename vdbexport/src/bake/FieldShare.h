@@ -39,6 +39,11 @@ struct FieldShare
     std::uint64_t voxelsHeld = 0;               ///< field voxels of the dense velocity copy here
 };
 
+/// Output voxels from a process's bricks within which a spot centre can change one of its voxels:
+/// for the gather engines a voxel's window (the ghost margin) meets the spot's largest halo; for
+/// splat the spot's own line (n·h + R each way) and its footprint around it reach the brick.
+double spotReach(const Plan& plan);
+
 /// Field voxels (per side) by which a rank's part reaches past its bricks: the ghost margin, one
 /// integration step past the last sample (RK4 with stride, or RK45's largest step), the spot
 /// reach, the trilinear footprint, staggered neighbours, and (when the recipe uses scalars) the

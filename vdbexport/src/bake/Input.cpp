@@ -4,6 +4,7 @@
 #include "lic/Error.h"
 #include "lic/Region.h"
 
+#include <memory>
 #include <optional>
 
 namespace vdbexport::pipeline {
@@ -14,7 +15,7 @@ namespace {
 /// distribution over the output box, or evenly on the ridge surface of `surface`; only spots on
 /// active output voxels are kept; with a pre-mode ROI each spot is weighted by the mask at its
 /// centre and spots outside the region are dropped.
-lic::SpotSet makeSpotSet(const Recipe& r, const lic::OutputDomain& domain, const openvdb::FloatGrid* roiPre,
+lic::SpotSet makeSpotSet(const Recipe& r, const lic::OutputDomain& domain, openvdb::FloatGrid::ConstPtr roiPre,
                          const openvdb::FloatGrid* surface, const SpotShare* share, std::uint64_t& owned)
 {
     std::vector<openvdb::Vec3d> centers;
@@ -34,8 +35,8 @@ lic::SpotSet makeSpotSet(const Recipe& r, const lic::OutputDomain& domain, const
                                    r.input.jitter, r.input.seed},
                                   box);
     }
-    std::optional<ScalarProbe> probe;
-    if (roiPre) probe.emplace(*roiPre);
+    std::optional<ScalarField> probe;
+    if (roiPre) probe.emplace(roiPre);
     lic::SpotSet set;
     owned = 0;
     for (const auto& c : centers) {
@@ -61,17 +62,16 @@ Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& sc
     if (plan.spots) {
         openvdb::FloatGrid::ConstPtr roi = plan.roiPre ? scalars.get(r.roi->scalar) : nullptr;
         openvdb::FloatGrid::ConstPtr surface = r.input.surface ? scalars.get(r.input.surface->scalar) : nullptr;
-        in.spots = makeSpotSet(r, domain, roi.get(), surface.get(), share, in.spotCount);
+        in.spots = makeSpotSet(r, domain, roi, surface.get(), share, in.spotCount);
         return in;
     }
     lic::NoiseBrickSource::Premask premask;
     if (plan.roiPre) {
         // Pre-mask: the noise itself is weighted, so the region's edge runs along the flow.
-        const ScalarSource roi(scalars.get(r.roi->scalar));
+        auto roi = std::make_shared<const ScalarField>(scalars.get(r.roi->scalar));
         const std::array<double, 2> range = r.roi->range;
         premask = [roi, range, &domain](lic::NoiseTexture& t) {
-            ScalarProbe probe = roi.probe();
-            t.multiply([&](const openvdb::Coord& ijk) { return lic::roiWeight(probe.at(domain.worldOf(ijk)), range[0], range[1]); },
+            t.multiply([&](const openvdb::Coord& ijk) { return lic::roiWeight(roi->at(domain.worldOf(ijk)), range[0], range[1]); },
                        false);
         };
     }

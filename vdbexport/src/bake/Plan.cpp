@@ -13,20 +13,15 @@ namespace fs = std::filesystem;
 
 namespace {
 
-void requireNotYet(bool used, const std::string& what)
-{
-    if (used) {
-        throw lic::InputError(what + " is not available in this version of licvdb yet; remove it "
-                                     "from the recipe or command line (see `licvdb help bake`)");
-    }
-}
-
 /// Refuse recipe features that later releases add, and combinations that mean nothing, rather
 /// than silently ignoring them.
 void checkSupported(const Recipe& r)
 {
-    requireNotYet(r.lic.engine == "splat", "lic.engine \"splat\"");
     const bool spots = r.input.type == "spots";
+    if (!spots && r.lic.engine == "splat") {
+        throw lic::InputError("lic.engine \"splat\" (--engine splat) deposits spot footprints: it needs spot input "
+                              "(input.type \"spots\"); use fast or naive for noise");
+    }
     if (!spots && r.width) {
         throw lic::InputError("width needs spot input (input.type \"spots\", --input spots): line width "
                               "comes from the spot radii input.radii");

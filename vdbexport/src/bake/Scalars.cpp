@@ -1,16 +1,18 @@
 #include "Scalars.h"
 
+#include "lic/Error.h"
 #include "lic/Parallel.h"
 #include "lic/Region.h"
 #include "lic/Scalars.h"
 
-#include <openvdb/tools/Interpolation.h>
+#include <openvdb/tools/Dense.h>
 
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
 
 #include <bit>
 #include <cmath>
+#include <optional>
 #include <vector>
 
 namespace vdbexport::pipeline {
@@ -18,20 +20,38 @@ namespace vdbexport::pipeline {
 namespace {
 const char* const kWholeBoxMin = "licvdb_whole_active_bbox_min";
 const char* const kWholeBoxMax = "licvdb_whole_active_bbox_max";
+const char* const kPartBoxMin = "licvdb_part_bbox_min";
+const char* const kPartBoxMax = "licvdb_part_bbox_max";
+
+std::optional<openvdb::CoordBBox> boxMeta(const openvdb::GridBase& grid, const char* lo, const char* hi)
+{
+    const auto a = grid.getMetadata<openvdb::Vec3IMetadata>(lo);
+    const auto b = grid.getMetadata<openvdb::Vec3IMetadata>(hi);
+    if (a && b) return openvdb::CoordBBox(openvdb::Coord(a->value()), openvdb::Coord(b->value()));
+    return std::nullopt;
+}
 } // namespace
 
 openvdb::CoordBBox activeBoxOf(const openvdb::GridBase& grid)
 {
-    const auto lo = grid.getMetadata<openvdb::Vec3IMetadata>(kWholeBoxMin);
-    const auto hi = grid.getMetadata<openvdb::Vec3IMetadata>(kWholeBoxMax);
-    if (lo && hi) return openvdb::CoordBBox(openvdb::Coord(lo->value()), openvdb::Coord(hi->value()));
+    if (auto b = boxMeta(grid, kWholeBoxMin, kWholeBoxMax)) return *b;
     return grid.evalActiveVoxelBoundingBox();
 }
 
-void setWholeActiveBox(openvdb::GridBase& grid, const openvdb::CoordBBox& box)
+openvdb::CoordBBox partBoxOf(const openvdb::GridBase& grid)
 {
-    grid.insertMeta(kWholeBoxMin, openvdb::Vec3IMetadata(box.min().asVec3i()));
-    grid.insertMeta(kWholeBoxMax, openvdb::Vec3IMetadata(box.max().asVec3i()));
+    if (auto b = boxMeta(grid, kPartBoxMin, kPartBoxMax)) return *b;
+    return activeBoxOf(grid);
+}
+
+bool isPart(const openvdb::GridBase& grid) { return boxMeta(grid, kWholeBoxMin, kWholeBoxMax).has_value(); }
+
+void setPartOf(openvdb::GridBase& grid, const openvdb::CoordBBox& whole, const openvdb::CoordBBox& part)
+{
+    grid.insertMeta(kWholeBoxMin, openvdb::Vec3IMetadata(whole.min().asVec3i()));
+    grid.insertMeta(kWholeBoxMax, openvdb::Vec3IMetadata(whole.max().asVec3i()));
+    grid.insertMeta(kPartBoxMin, openvdb::Vec3IMetadata(part.min().asVec3i()));
+    grid.insertMeta(kPartBoxMax, openvdb::Vec3IMetadata(part.max().asVec3i()));
 }
 
 openvdb::FloatGrid::ConstPtr ScalarSet::get(const std::string& name)
@@ -39,41 +59,55 @@ openvdb::FloatGrid::ConstPtr ScalarSet::get(const std::string& name)
     const std::lock_guard lock(mMutex);
     if (auto it = mCache.find(name); it != mCache.end()) return it->second;
     static const std::string kGradient = "-gradient";
-    const bool part = mVelocity.getMetadata<openvdb::Vec3IMetadata>(kWholeBoxMin) != nullptr;
+    const bool part = isPart(mVelocity);
     openvdb::FloatGrid::ConstPtr g;
     if (name.size() > kGradient.size() && name.ends_with(kGradient)) {
         const auto base = lic::resolveScalar(mVelocity, mFile, name.substr(0, name.size() - kGradient.size()));
         auto grad = lic::gradientMagnitude(*base, name);
-        // Same active topology as its base: a part's whole box is the base's.
-        if (base->getMetadata<openvdb::Vec3IMetadata>(kWholeBoxMin)) setWholeActiveBox(*grad, activeBoxOf(*base));
+        // Same active topology as its base: a part's boxes are the base's.
+        if (isPart(*base)) setPartOf(*grad, activeBoxOf(*base), partBoxOf(*base));
         g = grad;
     } else {
         g = lic::resolveScalar(mVelocity, mFile, name);
-        if (part && !g->getMetadata<openvdb::Vec3IMetadata>(kWholeBoxMin)) {
-            // Derived from a part of the velocity (file scalars carry their own box): the
-            // velocity's topology, so its whole box.
+        if (part && !isPart(*g)) {
+            // Derived from a part of the velocity (file scalars carry their own boxes): the
+            // velocity's topology, so its boxes.
             auto derived = openvdb::ConstPtrCast<openvdb::FloatGrid>(g);
-            setWholeActiveBox(*derived, activeBoxOf(mVelocity));
+            setPartOf(*derived, activeBoxOf(mVelocity), partBoxOf(mVelocity));
         }
     }
     return mCache[name] = g;
 }
 
-ScalarProbe::ScalarProbe(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& bb)
-    : mGrid(grid)
-    , mAcc(grid.getConstAccessor())
-    , mLo(bb.min().asVec3d())
-    , mHi(bb.max().asVec3d())
+ScalarField::ScalarField(openvdb::FloatGrid::ConstPtr grid)
+    : mGrid(std::move(grid))
 {
-}
-
-float ScalarProbe::at(const openvdb::Vec3d& world)
-{
-    openvdb::Vec3d idx = mGrid.worldToIndex(world);
-    for (int a = 0; a < 3; ++a) idx[a] = std::clamp(idx[a], mLo[a], mHi[a]);
-    float v = 0.0f;
-    openvdb::tools::BoxSampler::sample(mAcc, idx, v);
-    return v;
+    const bool part = isPart(*mGrid);
+    const openvdb::CoordBBox bb = part ? activeBoxOf(*mGrid) : mGrid->evalActiveVoxelBoundingBox();
+    if (bb.empty()) throw lic::InputError("scalar grid \"" + mGrid->getName() + "\" has no active voxels");
+    openvdb::CoordBBox held = bb; // the dense copy: the active box, or the part of it held here
+    if (part) {
+        held.intersect(partBoxOf(*mGrid));
+        if (held.empty()) held = openvdb::CoordBBox(bb.min(), bb.min());
+    }
+    const openvdb::Coord dim = held.dim();
+    if (double(dim[0]) * dim[1] * dim[2] > double(1u << 28)) {
+        throw lic::InputError("scalar grid \"" + mGrid->getName() + "\" has an active bounding box of more than 2^28 "
+                              "voxels; crop or resample the field");
+    }
+    mWorldToIndex = lic::AffineMap(mGrid->transform()).worldToIndex;
+    for (int a = 0; a < 3; ++a) {
+        mLo[a] = bb.min()[a];
+        mHi[a] = bb.max()[a];
+        mOff[a] = held.min()[a] - bb.min()[a];
+        mDim[a] = dim[a];
+    }
+    mStride[0] = std::size_t(dim[1]) * std::size_t(dim[2]);
+    mStride[1] = std::size_t(dim[2]);
+    mStride[2] = 1;
+    openvdb::tools::Dense<float, openvdb::tools::LayoutZYX> dense(held, 0.0f);
+    openvdb::tools::copyToDense(*mGrid, dense);
+    mData.assign(dense.data(), dense.data() + dense.valueCount());
 }
 
 namespace {
@@ -91,21 +125,19 @@ using Histogram = std::vector<std::uint64_t>;
 /// A histogram of `bins` bins over the finite samples at every active output voxel: `add(key, h)`
 /// counts a sample's order key into h.
 template<typename Add>
-Histogram histogram(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain, int threads, std::size_t bins,
+Histogram histogram(const ScalarField& scalar, const lic::OutputDomain& domain, int threads, std::size_t bins,
                     const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce, Add add)
 {
     tbb::combinable<Histogram> parts([bins] { return Histogram(bins, 0); });
-    const openvdb::CoordBBox box = activeBoxOf(scalar);
     const std::size_t count = blocks ? blocks->size() : domain.blockCount();
     lic::detail::runWithThreads(threads, [&] {
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count), [&](const auto& r) {
-            ScalarProbe probe(scalar, box);
             Histogram& h = parts.local();
             for (std::size_t i = r.begin(); i != r.end(); ++i) {
                 const std::size_t b = blocks ? (*blocks)[i] : i;
                 const auto& mask = domain.blockMask(b);
                 for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off)) {
-                    const float v = probe.at(domain.worldOf(domain.coordOf(b * lic::OutputDomain::kBlockVoxels + off)));
+                    const float v = scalar.at(domain.worldOf(domain.coordOf(b * lic::OutputDomain::kBlockVoxels + off)));
                     if (std::isfinite(v)) add(orderKey(v), h);
                 }
             }
@@ -132,12 +164,12 @@ std::pair<int, std::uint64_t> binOfRank(const Histogram& h, std::uint64_t k)
 
 } // namespace
 
-std::array<double, 2> autoRange(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain, int threads)
+std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDomain& domain, int threads)
 {
     return autoRange(scalar, domain, threads, nullptr, {});
 }
 
-std::array<double, 2> autoRange(const openvdb::FloatGrid& scalar, const lic::OutputDomain& domain, int threads,
+std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDomain& domain, int threads,
                                 const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce)
 {
     constexpr std::size_t kBins = 65536;

@@ -28,7 +28,8 @@ Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::Met
     Written out;
     for (int f = 1; f <= plan.frames; ++f) out.paths.push_back(framePath(r.output.path, f, plan.frames));
     progress.begin(plan.frames > 1 ? "writing frames" : "writing", std::uint64_t(plan.frames));
-    try {
+    out.output = std::make_shared<OutputSet>(); // staged unseen; nothing to remove on failure
+    {
         for (int f = 1; f <= plan.frames; ++f) {
             if (progress.wasInterrupted()) throw lic::Cancelled();
             openvdb::GridPtrVec grids = compositor.frame(f);
@@ -38,16 +39,10 @@ Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::Met
             density.insertMeta("lic_frame", openvdb::Int32Metadata(f));
             if (r.output.half)
                 for (const auto& g : grids) g->setSaveFloatAsHalf(true);
-            writeVdbAtomic(out.paths[std::size_t(f - 1)], grids);
+            out.output->addVdb(out.paths[std::size_t(f - 1)], grids);
             if (f == 1) out.firstGrids = grids;
             progress.advance(1);
         }
-    } catch (...) {
-        for (const auto& p : out.paths) {
-            std::error_code ec;
-            fs::remove(p, ec);
-        }
-        throw;
     }
     progress.end();
     return out;
@@ -77,15 +72,9 @@ void writeManifest(const Plan& plan, const Written& written, double voxelSize, c
                                      {"voxel_size", {vs[0], vs[1], vs[2]}},
                                      {"world_bbox", bboxJson(worldBBoxOf(*g))}});
     }
-    try {
-        writeTextAtomic(manifestPath(plan.recipe.output.path), manifest.dump(2) + "\n");
-    } catch (...) {
-        for (const auto& p : written.paths) { // a manifest never points at a missing file, nor the reverse
-            std::error_code ec;
-            fs::remove(p, ec);
-        }
-        throw;
-    }
+    for (const auto& p : written.paths) manifest["sha256"][fs::path(p).filename().string()] = written.output->sha256(p);
+    written.output->addText(manifestPath(plan.recipe.output.path), manifest.dump(2) + "\n");
+    written.output->commit(); // frames first, manifest last, under a lock on the directory
 }
 
 } // namespace vdbexport::pipeline

@@ -1,18 +1,21 @@
-// Stage 7 of a bake: write. The frames (one file, or OUT_0001 … OUT_NNNN for a loop) each written
-// atomically as soon as its grids are composed, then the manifest; a failure removes every frame
-// already written, so a failed bake leaves nothing.
+// Stage 7 of a bake: write. The frames (one file, or OUT_0001 … OUT_NNNN for a loop) are each
+// staged out of sight as soon as its grids are composed, then the manifest with their SHA-256;
+// then all are committed together (vdbexport::OutputSet): a failed or killed bake leaves nothing,
+// and two bakes to one output never leave the manifest of one beside the frames of the other.
 #pragma once
 
 #include "Composite.h"
 #include "Plan.h"
 
 #include "lic/Progress.h"
+#include "vdbexport/VdbIO.h"
 
 #include <nlohmann/json.hpp>
 
 #include <openvdb/openvdb.h>
 
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -22,6 +25,7 @@ struct Written
 {
     std::vector<std::string> paths;     ///< the frame files, in order
     openvdb::GridPtrVec firstGrids;     ///< frame 1's grids as written (for the manifest and summary)
+    std::shared_ptr<OutputSet> output;  ///< the staged frames, committed by writeManifest
 };
 
 /// Called with each frame's grids as composed here, before they are written: a distributed
@@ -32,7 +36,8 @@ using FrameHook = std::function<void(int frame, openvdb::GridPtrVec& grids)>;
 Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::MetaMap& densityMeta,
                     lic::Progress& progress, const FrameHook& gather = {});
 
-/// Write the sidecar manifest of a bake (atomically), after its frames.
+/// Write the sidecar manifest of a bake (with the frames' SHA-256), then commit the frames and
+/// the manifest together.
 void writeManifest(const Plan& plan, const Written& written, double voxelSize, const nlohmann::json& resolved,
                    const nlohmann::json& colorJson, const nlohmann::json& spotsJson);
 

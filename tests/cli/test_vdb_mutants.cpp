@@ -1,0 +1,217 @@
+// End to end, the .vdb read defences and the bake's output (issue 19): `licvdb info --check`
+// exits 0 for intact files and 2 with the reason for corrupt ones; hundreds of mutants of
+// several files fed to `info --check` and `bake` each exit 0 or 2, never crash, never take 10 s;
+// concurrent bakes to one output leave a manifest that matches the .vdb beside it; a bake
+// killed mid-way leaves no file, temporary or final.
+#include "InputsHarness.h"
+
+#include "../unit/VdbMutants.h"
+#include "../unit/VdbSamples.h"
+
+#include "vdbexport/Sha256.h"
+#include "vdbexport/VdbIO.h"
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cstring>
+#include <set>
+
+using namespace inputs_test;
+
+namespace {
+
+double secondsSince(std::chrono::steady_clock::time_point t0)
+{
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+/// Names of the entries of `dir`.
+std::set<std::string> listing(const fs::path& dir)
+{
+    std::set<std::string> out;
+    for (const auto& e : fs::directory_iterator(dir)) out.insert(e.path().filename().string());
+    return out;
+}
+
+/// Offset of the first blosc header that says it holds `nbytes` bytes (see test_vdbcheck.cpp).
+std::size_t findBloscHeader(const std::string& bytes, uint32_t nbytes)
+{
+    for (std::size_t i = 8; i + 16 <= bytes.size(); ++i) {
+        uint32_t n = 0, cbytes = 0;
+        int64_t stored = 0;
+        std::memcpy(&n, &bytes[i + 4], 4);
+        std::memcpy(&cbytes, &bytes[i + 12], 4);
+        std::memcpy(&stored, &bytes[i - 8], 8);
+        if (bytes[i] == 2 && n == nbytes && stored == int64_t(cbytes)) return i;
+    }
+    return std::string::npos;
+}
+
+/// The `seed` of the recipe stored in the `density` grid of a bake.
+int64_t recipeSeedInFile(const fs::path& vdb)
+{
+    openvdb::io::File file(vdb.string());
+    file.open(false);
+    auto grid = file.readGridMetadata("density");
+    file.close();
+    const auto recipe = nlohmann::json::parse(grid->metaValue<std::string>("licvdb_recipe"));
+    return recipe["input"]["seed"].get<int64_t>();
+}
+
+class VdbMutantsTest : public InputsTest
+{};
+
+} // namespace
+
+TEST_F(VdbMutantsTest, InfoCheckExitsZeroForIntactFilesAndTwoWithTheReasonOtherwise)
+{
+    const fs::path w = work();
+    const auto samples = vdb_samples::writeVdbSamples(w, 8);
+    for (const auto& s : samples) {
+        const RunResult r = run({"info", "--check", s});
+        EXPECT_EQ(r.code, 0) << r.describe();
+        EXPECT_NE(r.out.find("intact"), std::string::npos) << r.describe();
+    }
+    for (const auto& [path, words] : std::vector<std::pair<fs::path, std::string>>{
+             {w / "missing.vdb", "not found"}, {w, "is a directory"}}) {
+        const RunResult r = run({"info", "--check", path.string()});
+        EXPECT_EQ(r.code, 2) << r.describe();
+        EXPECT_NE(r.err.find(words), std::string::npos) << r.describe();
+    }
+    const RunResult j = run({"info", "--check", "--json", samples[0]});
+    ASSERT_EQ(j.code, 0) << j.describe();
+    const auto ok = nlohmann::json::parse(j.out);
+    EXPECT_TRUE(ok["ok"].get<bool>());
+    ASSERT_EQ(ok["grids"].size(), 1u); // the abc preset's velocity
+    EXPECT_EQ(ok["grids"][0]["value_type"], "vec3s");
+    EXPECT_GT(ok["grids"][0]["leaves"].get<int>(), 0);
+
+    // The lie of issue 19: a vec3s leaf's blosc block claiming 8182 bytes (the leaf holds 6144).
+    std::string bytes = readText(samples[0]);
+    const std::size_t at = findBloscHeader(bytes, 6144);
+    ASSERT_NE(at, std::string::npos);
+    const uint32_t lie = 8182;
+    std::memcpy(&bytes[at + 4], &lie, 4);
+    writeBytes(w / "lying.vdb", bytes);
+    for (const auto& args : std::vector<std::vector<std::string>>{{"info", "--check", (w / "lying.vdb").string()},
+                                                                  {"info", (w / "lying.vdb").string()},
+                                                                  {"render", (w / "lying.vdb").string(), "--out", "x.png"},
+                                                                  bakeArgs(w / "lying.vdb", w / "out.vdb")}) {
+        const RunResult r = run(args);
+        EXPECT_EQ(r.code, 2) << r.describe();
+        EXPECT_NE(r.err.find("claims 8182 bytes where 6144 are expected"), std::string::npos) << r.describe();
+        EXPECT_NE(r.err.find("lying.vdb"), std::string::npos) << r.describe();
+    }
+    const RunResult bad = run({"info", "--check", "--json", (w / "lying.vdb").string()});
+    EXPECT_EQ(bad.code, 2) << bad.describe();
+    const auto no = nlohmann::json::parse(bad.out);
+    EXPECT_FALSE(no["ok"].get<bool>());
+    EXPECT_NE(no["error"].get<std::string>().find("8182"), std::string::npos);
+    EXPECT_FALSE(fs::exists(w / "out.vdb"));
+    EXPECT_FALSE(fs::exists(w / "x.png"));
+}
+
+// Mutants of three files (our field, a mantaflow-style half-float zip cache, a real bake): every
+// `info --check` and every `bake` exits 0 or 2 within 10 s, and a refused bake writes nothing.
+TEST_F(VdbMutantsTest, MutantsExitZeroOrTwoNeverCrashNeverHang)
+{
+    const fs::path w = work();
+    const fs::path src = w / "src";
+    fs::create_directories(src);
+    const auto samples = vdb_samples::writeVdbSamples(src, 16);
+    const RunResult baked = run(bakeArgs(samples[0], src / "bake.vdb", {"--quiet"}));
+    ASSERT_EQ(baked.code, 0) << baked.describe();
+    const std::vector<fs::path> files{samples[0], src / "mantaflow_half_zip.vdb", src / "bake.vdb"};
+    const int perKind = std::getenv("LICVDB_CLI_MUTANTS_PER_KIND") ? std::atoi(std::getenv("LICVDB_CLI_MUTANTS_PER_KIND")) : 8;
+    std::mt19937_64 rng(1919);
+    int runs = 0, zero = 0, two = 0, bakes = 0;
+    double slowest = 0;
+    const fs::path m = w / "mutant.vdb";
+    const fs::path outDir = w / "out";
+    fs::create_directories(outDir);
+    for (const auto& file : files) {
+        const std::string bytes = readText(file);
+        for (int kind = 0; kind < vdb_mutants::kKinds; ++kind) {
+            for (int n = 0; n < perKind; ++n) {
+                writeBytes(m, vdb_mutants::mutate(bytes, kind, rng));
+                SCOPED_TRACE(file.filename().string() + ", " + vdb_mutants::kindName(kind) + " #" + std::to_string(n));
+                std::vector<std::vector<std::string>> commands{{"info", "--check", m.string()}};
+                if (n % 2 == 0 && file != src / "bake.vdb")
+                    commands.push_back(bakeArgs(m, outDir / "lic.vdb", {"--quiet", "--length", "2"}));
+                for (const auto& args : commands) {
+                    const auto t0 = std::chrono::steady_clock::now();
+                    const RunResult r = run(args);
+                    const double s = secondsSince(t0);
+                    slowest = std::max(slowest, s);
+                    ++runs;
+                    EXPECT_TRUE(r.code == 0 || r.code == 2) << r.describe();
+                    EXPECT_LT(s, 10.0) << r.describe();
+                    (r.code == 0 ? zero : two)++;
+                    if (args[0] == "bake") {
+                        ++bakes;
+                        const auto left = listing(outDir);
+                        if (r.code == 2) EXPECT_TRUE(left.empty()) << "a refused bake left " << *left.begin();
+                        else EXPECT_EQ(left, (std::set<std::string>{"lic.json", "lic.vdb"}));
+                        for (const auto& e : left) fs::remove(outDir / e);
+                    }
+                }
+            }
+        }
+    }
+    std::cout << "[ mutants  ] " << runs << " runs (" << runs - bakes << " info --check, " << bakes << " bake) on mutants of "
+              << files.size() << " files: " << zero << " exit 0, " << two << " exit 2, slowest " << slowest << " s\n";
+    EXPECT_GE(runs, perKind >= 8 ? 150 : 40);
+}
+
+// Two bakes with different seeds writing the same output, again and again: afterwards the
+// manifest always describes the .vdb beside it (same seed, matching SHA-256).
+TEST_F(VdbMutantsTest, ConcurrentBakesLeaveAManifestThatMatchesTheVdb)
+{
+    const fs::path w = work();
+    const auto samples = vdb_samples::writeVdbSamples(w, 16);
+    const std::string field = samples[0];
+    const fs::path out = w / "same.vdb";
+    for (int round = 0; round < 6; ++round) {
+        std::string cmd;
+        for (int seed = 1; seed <= 3; ++seed)
+            cmd += cli_test::licvdbCommand(bakeArgs(field, out, {"--quiet", "--seed", std::to_string(seed + 10 * round)})) + " & ";
+        const RunResult r = runCommand("( " + cmd + "wait )");
+        ASSERT_EQ(r.code, 0) << r.describe();
+        const auto manifest = nlohmann::json::parse(readText(w / "same.json"));
+        EXPECT_EQ(manifest["recipe"]["input"]["seed"].get<int64_t>(), recipeSeedInFile(out)) << "round " << round;
+        EXPECT_EQ(manifest["sha256"]["same.vdb"].get<std::string>(), vdbexport::sha256OfFile(out.string()));
+        for (const auto& name : listing(w)) EXPECT_EQ(name.find(".tmp-"), std::string::npos) << name;
+    }
+}
+
+// A bake killed (SIGKILL) at any moment leaves either nothing or a complete, matching pair.
+TEST_F(VdbMutantsTest, KilledBakeLeavesNoFile)
+{
+    const fs::path w = work();
+    const fs::path in = w / "in";
+    fs::create_directories(in);
+    const auto samples = vdb_samples::writeVdbSamples(in, 24);
+    const fs::path outDir = w / "out";
+    fs::create_directories(outDir);
+    int killed = 0, finished = 0;
+    for (const double delay : {0.05, 0.15, 0.3, 0.5, 0.8, 1.2}) {
+        const std::string bake = cli_test::licvdbCommand(
+            bakeArgs(samples[0], outDir / "k.vdb", {"--quiet", "--length", "12", "--upsample", "2", "--frames", "3"}));
+        const RunResult r = runCommand("( " + bake + " & pid=$!; sleep " + std::to_string(delay) +
+                                       "; kill -9 $pid 2>/dev/null && echo killed; wait $pid; true )");
+        const auto left = listing(outDir);
+        if (r.out.find("killed") != std::string::npos && left.empty()) {
+            ++killed;
+        } else {
+            ++finished;
+            ASSERT_EQ(left, (std::set<std::string>{"k.json", "k_0001.vdb", "k_0002.vdb", "k_0003.vdb"})) << r.describe();
+            const auto manifest = nlohmann::json::parse(readText(outDir / "k.json"));
+            for (const char* f : {"k_0001.vdb", "k_0002.vdb", "k_0003.vdb"})
+                EXPECT_EQ(manifest["sha256"][f].get<std::string>(), vdbexport::sha256OfFile((outDir / f).string()));
+        }
+        for (const auto& e : left) fs::remove(outDir / e);
+    }
+    std::cout << "[ killed   ] " << killed << " bakes killed mid-way left nothing; " << finished << " had finished\n";
+    EXPECT_GE(killed, 3); // most kills land while the bake runs
+}

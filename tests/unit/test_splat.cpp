@@ -1,0 +1,190 @@
+// The splat engine: agreement with the naive gather on the same spots (all channels, box and exp
+// kernels, straight and diverging flows, walls), bit-identical for any thread count, work that
+// follows the lines and not the box, and one trace for a loop.
+#include "lic/Engine.h"
+#include "lic/FieldPresets.h"
+#include "lic/Noise.h"
+#include "lic/SplatLic.h"
+#include "lic/Spots.h"
+
+#include "TestFields.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <cmath>
+#include <cstring>
+
+using namespace lic;
+
+namespace {
+
+SpotSet poissonSpots(const OutputDomain& domain, double spacing, std::uint64_t seed)
+{
+    const openvdb::CoordBBox ib = domain.indexBBox();
+    SpotSet set;
+    set.centers = placeSpots({SpotDistribution::Poisson, spacing, 0.25, seed},
+                             openvdb::BBoxd(ib.min().asVec3d(), ib.max().asVec3d()));
+    set.weights.assign(set.centers.size(), 1.0f);
+    return set;
+}
+
+/// Pearson correlation over active voxels where either value exceeds 0.001.
+double correlation(const OutputDomain& d, const std::vector<float>& a, const std::vector<float>& b)
+{
+    double sxy = 0, sx = 0, sy = 0, sxx = 0, syy = 0, n = 0;
+    for (std::size_t s = 0; s < a.size(); ++s) {
+        if (!d.isActive(s) || (a[s] <= 0.001f && b[s] <= 0.001f)) continue;
+        sx += a[s], sy += b[s], sxx += double(a[s]) * a[s], syy += double(b[s]) * b[s], sxy += double(a[s]) * b[s], n += 1;
+    }
+    return (sxy - sx * sy / n) / std::sqrt((sxx - sx * sx / n) * (syy - sy * sy / n));
+}
+
+} // namespace
+
+TEST(SplatTables, MatchTheWindowSumOfAStraightLine)
+{
+    // W(τ, d) is the window average of the spot profile along a straight line at distance d, the
+    // window centred τ from the spot: compare with the sum worked out directly.
+    LicSettings s;
+    s.length = 6;
+    s.step = 0.5;
+    const SplatTables t({1.5}, s);
+    for (double tau : {-7.0, -3.3, 0.0, 0.37, 2.0, 6.9}) {
+        for (double d : {0.0, 0.6, 1.2, 1.9}) {
+            double want = 0;
+            for (int i = -12; i <= 12; ++i) {
+                double slope;
+                want += spotProfile(std::sqrt(d * d + (tau + 0.5 * i) * (tau + 0.5 * i)), 1.5, slope);
+            }
+            want /= 25.0;
+            float got = 0;
+            t.add(tau, d, 1.0f, &got);
+            EXPECT_NEAR(got, want, 0.01) << "tau " << tau << " d " << d;
+        }
+    }
+    float outside = 0;
+    t.add(t.tauMax() + 0.1, 0.0, 1.0f, &outside);
+    t.add(0.0, t.reach() + 0.01, 1.0f, &outside);
+    EXPECT_EQ(outside, 0.0f);
+}
+
+TEST(Splat, AgreesWithNaiveOnTheSameSpots)
+{
+    // A small tabbed jet (diverging, with vortices), three widths with halos: every channel of the
+    // splat correlates with the naive gather ≥ 0.9 where either is non-zero, for the box and exp
+    // kernels; in uniform flow it is exact to interpolation.
+    struct Case
+    {
+        const char* preset;
+        KernelType kernel;
+        double minLine, minHalo;
+    };
+    for (const Case& c : {Case{"tabbed-jet", KernelType::Box, 0.95, 0.9}, Case{"tabbed-jet", KernelType::Exp, 0.95, 0.9},
+                          Case{"uniform", KernelType::Box, 0.995, 0.99}}) {
+        const VelocityField field(makePresetField(c.preset, openvdb::Coord(32, 32, 48)).velocity);
+        const OutputDomain domain(field, 2);
+        const SpotSet set = poissonSpots(domain, 10.0, 7);
+        LicSettings s;
+        s.length = 12;
+        s.kernel = c.kernel;
+        s.engine = EngineType::Naive;
+        const LicResult naive = convolveSpots(field, domain, set, {1.0, 1.5, 2.0}, 2.0, s);
+        s.engine = EngineType::Splat;
+        const LicResult splat = convolveSpots(field, domain, set, {1.0, 1.5, 2.0}, 2.0, s);
+        for (int ch = 0; ch < 6; ++ch) {
+            const double r = correlation(domain, naive.channels[std::size_t(ch)], splat.channels[std::size_t(ch)]);
+            std::printf("%s %s channel %d: splat vs naive correlation %.4f\n", c.preset, toString(c.kernel), ch, r);
+            EXPECT_GE(r, ch < 3 ? c.minLine : c.minHalo) << c.preset << " " << toString(c.kernel) << " channel " << ch;
+        }
+    }
+}
+
+TEST(Splat, ManyBricksAreBitIdenticalForOneToFourThreads)
+{
+    const tbb::global_control allow(tbb::global_control::max_allowed_parallelism, 4);
+    const VelocityField field(makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36)).velocity);
+    const OutputDomain domain(field, 2);
+    const SpotSet set = poissonSpots(domain, 7.0, 3);
+    for (bool ripple : {false, true}) {
+        LicSettings s;
+        s.engine = EngineType::Splat;
+        s.length = 8;
+        s.brick = 16;
+        s.ripple = ripple;
+        std::vector<std::vector<float>> ref;
+        for (int threads : {1, 2, 3, 4}) {
+            s.threads = threads;
+            const LicResult r = convolveSpots(field, domain, set, {1.0, 2.0}, 2.0, s);
+            EXPECT_GT(r.stats.bricks, 20u);
+            if (threads == 1) {
+                ref = r.channels;
+                continue;
+            }
+            for (std::size_t k = 0; k < ref.size(); ++k)
+                EXPECT_EQ(0, std::memcmp(ref[k].data(), r.channels[k].data(), ref[k].size() * sizeof(float)))
+                    << "channel " << k << ", " << threads << " threads, ripple " << ripple;
+        }
+    }
+}
+
+TEST(Splat, WorkFollowsTheLinesNotTheBox)
+{
+    // The same 27 spots in a box 8× larger: the same streamlines, the same deposits, and only the
+    // bricks the footprints reach are visited.
+    LicSettings s;
+    s.engine = EngineType::Splat;
+    s.length = 6;
+    s.brick = 16;
+    LicStats small, large;
+    std::size_t smallBricks = 0, largeBricks = 0;
+    for (int n : {16, 32}) {
+        const VelocityField field(makePresetField("uniform", openvdb::Coord(n)).velocity);
+        const OutputDomain domain(field, 2);
+        SpotSet set;
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j)
+                for (int k = 0; k < 3; ++k) set.centers.emplace_back(10.3 + 6 * i, 9.7 + 6 * j, 10.1 + 6 * k);
+        set.weights.assign(set.centers.size(), 1.0f);
+        const LicResult r = convolveSpots(field, domain, set, {1.0}, 2.0, s);
+        (n == 16 ? small : large) = r.stats;
+        (n == 16 ? smallBricks : largeBricks) = BrickLayout(domain, 16).size();
+    }
+    EXPECT_EQ(largeBricks, 8 * smallBricks);
+    EXPECT_EQ(small.streamlines, 27u);
+    EXPECT_EQ(large.streamlines, 27u);
+    EXPECT_GT(small.deposits, 5000u);
+    // In the small box the lines of the outermost spots end at the wall; in the large one they
+    // run on, so the large box deposits a little more, never more than the longer lines allow.
+    EXPECT_GE(large.deposits, small.deposits);
+    EXPECT_LT(double(large.deposits), 1.6 * double(small.deposits));
+    EXPECT_LE(large.bricks, 27u); // of 64: only where footprints reach
+}
+
+TEST(Splat, ALoopTracesTheSameLinesAsAStill)
+{
+    const VelocityField field(makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36)).velocity);
+    const OutputDomain domain(field, 2);
+    const SpotSet set = poissonSpots(domain, 7.0, 5);
+    LicSettings s;
+    s.engine = EngineType::Splat;
+    s.length = 8;
+    const LicResult still = convolveSpots(field, domain, set, {1.0}, 2.0, s);
+    s.ripple = true;
+    const LicResult loop = convolveSpots(field, domain, set, {1.0}, 2.0, s);
+    ASSERT_EQ(loop.channels.size(), 8u);
+    EXPECT_EQ(loop.stats.samples, still.stats.samples);
+    EXPECT_EQ(loop.stats.deposits, still.stats.deposits);
+    for (int c = 0; c < 2; ++c)
+        EXPECT_EQ(0, std::memcmp(loop.channels[std::size_t(c)].data(), still.channels[std::size_t(c)].data(),
+                                 still.channels[0].size() * sizeof(float)));
+}
+
+TEST(Splat, NoiseIsRefused)
+{
+    const VelocityField field(lictest::abcField(8));
+    const OutputDomain domain(field, 2);
+    LicSettings s;
+    s.engine = EngineType::Splat;
+    EXPECT_THROW(convolve(field, domain, ConstantTexture(1.0f), s), InputError);
+}

@@ -1,0 +1,351 @@
+// Tests of vdbexport/VdbCheck.h: the structural check of .vdb files accepts every kind of real
+// file, refuses lying sizes before OpenVDB reads them, and hundreds of mutants of several files
+// are each either read or refused with lic::InputError — never a crash (scripts/test-sanitize
+// runs this under ASan + UBSan), never more than 10 s.
+#include <gtest/gtest.h>
+
+#include "VdbMutants.h"
+#include "VdbSamples.h"
+
+#include "vdbexport/Info.h"
+#include "vdbexport/Sha256.h"
+#include "vdbexport/VdbCheck.h"
+#include "vdbexport/VdbIO.h"
+
+#include <lic/Error.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+class VdbCheckTest : public ::testing::Test
+{
+protected:
+    void SetUp() override
+    {
+        openvdb::initialize();
+        static std::atomic<int> counter{0};
+        mDir = fs::temp_directory_path() / ("licvdb_test_vdbcheck_" + std::to_string(::getpid()) + "_"
+                                            + std::to_string(counter++));
+        fs::create_directories(mDir);
+    }
+    void TearDown() override
+    {
+        std::error_code ec;
+        fs::remove_all(mDir, ec);
+    }
+    fs::path mDir;
+};
+
+std::string readFile(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+void writeFile(const std::string& path, const std::string& bytes)
+{
+    std::ofstream(path, std::ios::binary | std::ios::trunc).write(bytes.data(), std::streamsize(bytes.size()));
+}
+
+std::string inputErrorOf(const std::function<void()>& fn)
+{
+    try {
+        fn();
+    } catch (const lic::InputError& e) {
+        return e.what();
+    }
+    ADD_FAILURE() << "expected lic::InputError, nothing was thrown";
+    return {};
+}
+
+#define EXPECT_CONTAINS(haystack, needle) \
+    EXPECT_NE(std::string(haystack).find(needle), std::string::npos) << "expected \"" << (needle) << "\" in: " << (haystack)
+
+/// Offset of the first blosc header in `bytes` that says it holds `nbytes` bytes, or npos.
+std::size_t findBloscHeader(const std::string& bytes, uint32_t nbytes)
+{
+    for (std::size_t i = 8; i + 16 <= bytes.size(); ++i) {
+        uint32_t n = 0, cbytes = 0;
+        int64_t stored = 0;
+        std::memcpy(&n, &bytes[i + 4], 4);
+        std::memcpy(&cbytes, &bytes[i + 12], 4);
+        std::memcpy(&stored, &bytes[i - 8], 8);
+        if (bytes[i] == 2 && n == nbytes && stored == int64_t(cbytes)) return i;
+    }
+    return std::string::npos;
+}
+
+} // namespace
+
+TEST_F(VdbCheckTest, AcceptsEveryKindOfRealFile)
+{
+    const auto samples = vdb_samples::writeVdbSamples(mDir);
+    ASSERT_EQ(samples.size(), 9u);
+    for (const auto& path : samples) {
+        SCOPED_TRACE(path);
+        vdbexport::VdbCheckResult r;
+        ASSERT_NO_THROW(r = vdbexport::checkVdbStructure(path));
+        EXPECT_GE(r.fileVersion, 222u);
+        EXPECT_FALSE(r.grids.empty());
+        const auto d = vdbexport::describeVdb(path); // and OpenVDB reads every grid
+        EXPECT_EQ(d["grids"].size(), r.grids.size());
+        for (const auto& g : r.grids) EXPECT_TRUE(g.skipReason.empty()) << g.name << ": " << g.skipReason;
+    }
+    // What the check saw in the mixed file: half floats, an instance, tiles, leaves, every type.
+    const auto r = vdbexport::checkVdbStructure((mDir / "all_types_blosc.vdb").string());
+    std::map<std::string, vdbexport::VdbGridCheck> byName;
+    for (const auto& g : r.grids) byName[g.name] = g;
+    EXPECT_TRUE(byName.at("float_instance").instance);
+    EXPECT_EQ(byName.at("float_instance").instanceParent, "float_tiles");
+    EXPECT_EQ(byName.at("float_tiles").tiles, 1u); // the inactive root tile; the 128³ tile is internal
+    EXPECT_EQ(byName.at("float_tiles").leaves, 3u);
+    EXPECT_TRUE(byName.at("vec3d").halfFloat);
+    EXPECT_EQ(byName.at("vec3d").valueType, "vec3d");
+    EXPECT_EQ(byName.at("bool").valueType, "bool");
+    EXPECT_EQ(byName.at("mask").valueType, "mask");
+    EXPECT_EQ(byName.at("empty").leaves, 0u);
+    const auto m = vdbexport::checkVdbStructure((mDir / "mantaflow_half_zip.vdb").string());
+    EXPECT_EQ(m.grids.back().name, "velocity");
+    EXPECT_TRUE(m.grids.back().halfFloat);
+    EXPECT_EQ(m.grids.back().leafVoxelsOn, 16u * 16u * 16u);
+}
+
+// The crash of issue 19: a blosc block in a vec3s leaf that claims 8182 bytes where the leaf
+// holds 512 × 12 = 6144. OpenVDB 10 copies it into the leaf buffer; the check refuses it first.
+TEST_F(VdbCheckTest, LyingBloscSizeInAVec3LeafIsRefusedBeforeOpenVdbReadsIt)
+{
+    const auto samples = vdb_samples::writeVdbSamples(mDir);
+    std::string bytes = readFile(samples[0]);
+    const std::size_t at = findBloscHeader(bytes, 6144);
+    ASSERT_NE(at, std::string::npos) << "no full vec3s leaf block in the sample";
+    const uint32_t lie = 8182;
+    std::memcpy(&bytes[at + 4], &lie, 4);
+    const std::string path = (mDir / "lying.vdb").string();
+    writeFile(path, bytes);
+    const std::string msg = inputErrorOf([&] { vdbexport::checkVdbStructure(path); });
+    EXPECT_CONTAINS(msg, "lying.vdb");
+    EXPECT_CONTAINS(msg, "is corrupt");
+    EXPECT_CONTAINS(msg, "grid 'velocity'");
+    EXPECT_CONTAINS(msg, "leaf at (");
+    EXPECT_CONTAINS(msg, "claims 8182 bytes where 6144 are expected");
+    // Every read path refuses it.
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::readVelocityGrid(path); }), "8182");
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::describeVdb(path); }), "8182");
+    // The block's stored length word made huge is refused by name too.
+    std::string bytes2 = readFile(samples[0]);
+    const int64_t huge = int64_t(1) << 40;
+    std::memcpy(&bytes2[at - 8], &huge, 8);
+    writeFile(path, bytes2);
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkVdbStructure(path); }), "compress to at most");
+}
+
+TEST_F(VdbCheckTest, HugeCountsAreRefusedAtOnce)
+{
+    const auto samples = vdb_samples::writeVdbSamples(mDir);
+    const std::string bytes = readFile(samples[0]);
+    const std::string path = (mDir / "huge.vdb").string();
+    // The file metadata count sits right after the 57-byte header.
+    std::string m = bytes;
+    const uint32_t big = 0xFFFFFFFFu;
+    std::memcpy(&m[57], &big, 4);
+    writeFile(path, m);
+    const auto t0 = std::chrono::steady_clock::now();
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkVdbStructure(path); }), "4294967295 metadata entries");
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 1.0);
+}
+
+TEST_F(VdbCheckTest, UnsupportedFormatVersionIsNamed)
+{
+    const auto samples = vdb_samples::writeVdbSamples(mDir);
+    std::string bytes = readFile(samples[0]);
+    const uint32_t old = 220;
+    std::memcpy(&bytes[8], &old, 4);
+    const std::string path = (mDir / "old.vdb").string();
+    writeFile(path, bytes);
+    const std::string msg = inputErrorOf([&] { vdbexport::checkVdbStructure(path); });
+    EXPECT_CONTAINS(msg, "format version 220");
+    EXPECT_CONTAINS(msg, "222 to 224");
+}
+
+// Hundreds of mutants of nine files (byte flips, truncations, huge 4- and 8-byte words, sizes off
+// by a little): each is read or refused with lic::InputError by every read path, in well under
+// 10 s; none crashes (under ASan: none corrupts memory).
+TEST_F(VdbCheckTest, MutantsAreReadOrRefusedNeverCrash)
+{
+    const auto samples = vdb_samples::writeVdbSamples(mDir);
+    const int perKind = std::getenv("LICVDB_MUTANTS_PER_KIND") ? std::atoi(std::getenv("LICVDB_MUTANTS_PER_KIND")) : 12;
+    std::mt19937_64 rng(19);
+    const std::string path = (mDir / "mutant.vdb").string();
+    int total = 0, refused = 0, read = 0;
+    double maxSeconds = 0;
+    std::map<std::string, int> reasons;
+    for (const auto& sample : samples) {
+        const std::string bytes = readFile(sample);
+        for (int kind = 0; kind < vdb_mutants::kKinds; ++kind) {
+            for (int n = 0; n < perKind; ++n) {
+                const std::string m = vdb_mutants::mutate(bytes, kind, rng);
+                writeFile(path, m);
+                vdbexport::detail::clearCheckedVdbCache();
+                SCOPED_TRACE(fs::path(sample).filename().string() + ", " + vdb_mutants::kindName(kind) + " #" + std::to_string(n));
+                const auto t0 = std::chrono::steady_clock::now();
+                bool ok = true;
+                try {
+                    (void)vdbexport::describeVdb(path);
+                    try {
+                        (void)vdbexport::readVelocityGrid(path);
+                    } catch (const lic::InputError& e) {
+                        // readable, but no usable velocity grid: that is fine too
+                        if (std::string(e.what()).find("corrupt") != std::string::npos) ok = false;
+                    }
+                    (void)vdbexport::readScalarGrids(path);
+                } catch (const lic::InputError& e) {
+                    ok = false;
+                    const std::string w = e.what();
+                    reasons[w.find("truncated") != std::string::npos ? "truncated"
+                            : w.find("is corrupt") != std::string::npos ? "corrupt (structural check)"
+                            : w.find("not an OpenVDB file") != std::string::npos ? "not a VDB file"
+                                                                                   : "other input error"]++;
+                    if (std::getenv("LICVDB_SHOW_MUTANT_ERRORS")) std::cout << w << "\n";
+                    EXPECT_CONTAINS(w, "mutant.vdb");
+                } catch (const std::exception& e) {
+                    ADD_FAILURE() << "not an InputError: " << e.what();
+                }
+                const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+                maxSeconds = std::max(maxSeconds, s);
+                EXPECT_LT(s, 10.0);
+                ++total;
+                (ok ? read : refused)++;
+            }
+        }
+    }
+    std::cout << "[ mutants  ] " << total << " mutants of " << samples.size() << " files: " << read << " read, "
+              << refused << " refused, slowest " << maxSeconds << " s\n";
+    for (const auto& [why, count] : reasons) std::cout << "[ mutants  ]   refused, " << why << ": " << count << "\n";
+    EXPECT_GE(total, 500);
+    EXPECT_GT(refused, total / 4); // the mutations do hit: most mutants are refused
+}
+
+// ---- layer 2: the isolated child process ------------------------------------------------------
+// A stand-in for `licvdb` (a shell script) shows what the parent makes of each way a child ends.
+
+namespace {
+
+struct IsolationGuard
+{
+    ~IsolationGuard()
+    {
+        vdbexport::setReadIsolation("");
+        ::unsetenv("LICVDB_READ_TIMEOUT");
+    }
+};
+
+std::string script(const fs::path& dir, const std::string& name, const std::string& body)
+{
+    const fs::path p = dir / name;
+    writeFile(p.string(), "#!/bin/sh\n" + body + "\n");
+    fs::permissions(p, fs::perms::owner_all);
+    return p.string();
+}
+
+} // namespace
+
+TEST_F(VdbCheckTest, IsolatedChildOutcomes)
+{
+    const IsolationGuard guard;
+    const auto samples = vdb_samples::writeVdbSamples(mDir, 8);
+    const std::string file = samples[0];
+    // Intact: exit 0. The child is run as `EXE info --check --quiet -- FILE` with LICVDB_READ_CHILD=1.
+    vdbexport::setReadIsolation(script(mDir, "ok.sh",
+        "[ \"$1 $2 $3 $4\" = 'info --check --quiet --' ] && [ \"$LICVDB_READ_CHILD\" = 1 ] && [ -f \"$5\" ] || exit 1\nexit 0"));
+    EXPECT_NO_THROW(vdbexport::checkInIsolatedProcess(file));
+    // Refused with a reason: exit 2, the reason from its stderr.
+    vdbexport::setReadIsolation(script(mDir, "bad.sh", "echo 'licvdb info: error: the reason given' >&2\nexit 2"));
+    EXPECT_EQ(inputErrorOf([&] { vdbexport::checkInIsolatedProcess(file); }), "the reason given");
+    // A crash of the reader: the file is refused, naming the signal.
+    vdbexport::setReadIsolation(script(mDir, "crash.sh", "kill -SEGV $$"));
+    const std::string crash = inputErrorOf([&] { vdbexport::checkInIsolatedProcess(file); });
+    EXPECT_CONTAINS(crash, "crashed OpenVDB's reader");
+    EXPECT_CONTAINS(crash, "signal 11");
+    // A hang: killed after LICVDB_READ_TIMEOUT seconds.
+    ::setenv("LICVDB_READ_TIMEOUT", "1", 1);
+    vdbexport::setReadIsolation(script(mDir, "hang.sh", "exec sleep 60"));
+    const auto t0 = std::chrono::steady_clock::now();
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkInIsolatedProcess(file); }), "did not finish within 1 s");
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+    // Another failure of the child is a runtime error (exit 1), not bad input.
+    vdbexport::setReadIsolation(script(mDir, "fail.sh", "echo 'licvdb info: error: out of memory' >&2\nexit 1"));
+    EXPECT_THROW(vdbexport::checkInIsolatedProcess(file), lic::Error);
+    try {
+        vdbexport::checkInIsolatedProcess(file);
+    } catch (const lic::InputError&) {
+        ADD_FAILURE() << "exit 1 must not be reported as bad input";
+    } catch (const lic::Error&) {
+    }
+    // Off: nothing is run.
+    vdbexport::setReadIsolation("");
+    EXPECT_NO_THROW(vdbexport::checkInIsolatedProcess(file));
+}
+
+TEST(Sha256, KnownDigests)
+{
+    vdbexport::Sha256 empty;
+    EXPECT_EQ(empty.hex(), "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+    vdbexport::Sha256 abc;
+    abc.update("abc", 3);
+    EXPECT_EQ(abc.hex(), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+    vdbexport::Sha256 two; // 448 bits: the padding spills into a second block
+    const std::string s = "abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq";
+    two.update(s.data(), s.size());
+    EXPECT_EQ(two.hex(), "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1");
+    vdbexport::Sha256 million; // a million 'a', fed in odd pieces
+    const std::string chunk(999, 'a');
+    std::size_t left = 1000000;
+    while (left > 0) {
+        const std::size_t n = std::min(left, chunk.size());
+        million.update(chunk.data(), n);
+        left -= n;
+    }
+    EXPECT_EQ(million.hex(), "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0");
+}
+
+// Found by fuzz_vdb (corpus/vdb/regress-half-flag-metadata): OpenVDB 10 takes a grid's half-float
+// flag from its `is_saved_as_half_float` metadata, not from the descriptor's `_HalfFloat`. With
+// the metadata renamed, OpenVDB reads half-float blocks as full floats and met a length word
+// in the middle of data (a 241 GB allocation); the check must read the flag the same way.
+TEST_F(VdbCheckTest, HalfFloatFlagIsTakenFromTheMetadataAsOpenVdbDoes)
+{
+    const auto samples = vdb_samples::writeVdbSamples(mDir, 8);
+    std::string bytes = readFile((mDir / "mantaflow_half_blosc.vdb").string());
+    const std::string key = "is_saved_as_half_float";
+    std::size_t renamed = 0;
+    for (std::size_t at = bytes.find(key); at != std::string::npos; at = bytes.find(key, at + 1), ++renamed)
+        bytes.replace(at + key.size() - 5, 5, "doubl");
+    ASSERT_EQ(renamed, 3u); // density, flame, velocity
+    const std::string path = (mDir / "renamed.vdb").string();
+    writeFile(path, bytes);
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkVdbStructure(path); }), "is corrupt");
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::describeVdb(path); }), "is corrupt");
+    // The fuzzer's own reproducer.
+    const std::string regress = std::string(LICVDB_SOURCE_DIR) + "/tests/fuzz/corpus/vdb/regress-half-flag-metadata";
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkVdbStructure(regress); }), "is corrupt");
+    // The flag itself of another type is refused by name.
+    std::string typed = readFile((mDir / "mantaflow_half_blosc.vdb").string());
+    const std::size_t at = typed.find(key);
+    ASSERT_NE(at, std::string::npos);
+    const std::size_t typeAt = at + key.size() + 4; // the type name "bool" after its length
+    ASSERT_EQ(typed.substr(typeAt, 4), "bool");
+    typed.replace(typeAt, 4, "bogo");
+    writeFile(path, typed);
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkVdbStructure(path); }), "half-float flag is a bogo");
+}

@@ -1,0 +1,80 @@
+// Checking an untrusted .vdb file against itself before OpenVDB reads it (layer 1 of the read
+// defences; see docs/inputs.md), and reading it once in a disposable child process (layer 2).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace vdbexport {
+
+/// What the structural check found in one grid of a .vdb file.
+struct VdbGridCheck
+{
+    std::string name;       ///< grid name as OpenVDB reports it (`vel`, or `vel[1]` for duplicates)
+    std::string gridType;   ///< tree type without the half-float suffix, e.g. `Tree_vec3s_5_4_3`
+    std::string valueType;  ///< `float`, `vec3s`, …; empty if licvdb does not read this type
+    std::string skipReason; ///< why the tree was not walked (unsupported type); empty if it was
+    bool halfFloat = false; ///< values stored as 16-bit floats
+    bool instance = false;  ///< shares the tree of `instanceParent`
+    std::string instanceParent;
+    uint32_t compression = 0; ///< io::COMPRESS_* flags of the grid
+    uint64_t tiles = 0, internalNodes = 0, leaves = 0;
+    uint64_t leafVoxelsOn = 0; ///< active voxels in leaves (active tiles not counted)
+};
+
+/// What the structural check found in a .vdb file.
+struct VdbCheckResult
+{
+    uint32_t fileVersion = 0;
+    uint32_t libraryMajor = 0, libraryMinor = 0;
+    uint64_t fileBytes = 0;
+    /// Estimated memory OpenVDB needs to hold every checked grid, in bytes (nodes and buffers).
+    uint64_t memoryBytes = 0;
+    std::vector<VdbGridCheck> grids;
+};
+
+/// @brief Walk a .vdb file's whole structure with bounds-checked reads, as OpenVDB 10 would read
+///        it, and refuse it before OpenVDB copies anything if any count, size or offset stored in
+///        the file disagrees with the file itself.
+///
+/// Checked: the header (magic, format version 222–224), the file and grid metadata (string and
+/// value sizes, the `__delayedload` table and its blosc blocks), the table of grids (names unique,
+/// instance parents present and of the same type, every grid's byte range inside the file and
+/// consistent with what it holds), each transform (known map type, finite, non-degenerate), and
+/// each tree: buffer count, root tiles and children (aligned, unique, within ±2^30), internal
+/// node masks (no slot both child and value), and for every node's value block and every leaf
+/// buffer the byte count it stores against what that node can hold given the grid's compression
+/// flags and half-float storage (the `is_saved_as_half_float` metadata, which OpenVDB 10 obeys;
+/// per-node mask metadata, inactive values, selection mask, raw,
+/// zip or blosc block: its header sizes must match, and it is decoded into a guarded scratch
+/// buffer that must come out exactly full). Grid types licvdb does not read (point grids) have
+/// their metadata and transform checked and their tree skipped (VdbGridCheck::skipReason).
+/// Memory: refuses a file whose grids would need more memory than this machine has.
+/// @param path  the .vdb file
+/// @return what was found (grids in file order)
+/// @throw lic::InputError naming `path`, where in the file (grid, node origin, byte offset) and
+///        what is wrong: not a VDB file, truncated, unsupported format version, or corrupt.
+VdbCheckResult checkVdbStructure(const std::string& path);
+
+/// @brief Layer 2: read every grid of `path` with OpenVDB in a separate process (`licvdb info
+///        --check`, see setReadIsolation), so that a file that crashes or hangs OpenVDB takes down
+///        only that process. Does nothing while no executable is set (library use, the child).
+/// Waits at most readTimeoutSeconds(file size), then kills the child.
+/// @throw lic::InputError if the child reports the file corrupt (its reason), is killed by a
+///        signal (the file crashed the reader) or runs out of time; lic::Error if the child cannot
+///        be started or fails for another reason.
+void checkInIsolatedProcess(const std::string& path);
+
+/// @brief Set the executable that checkInIsolatedProcess runs (`licvdb`); empty turns layer 2 off.
+/// `licvdb` sets itself at start-up, except in the child (environment LICVDB_READ_CHILD=1).
+void setReadIsolation(const std::string& executable);
+
+/// The executable set by setReadIsolation ("" if none).
+std::string readIsolationExecutable();
+
+/// @brief Time allowed for the isolated read of a file of `fileBytes` bytes, in seconds: 20 s plus
+///        1 s per 10 MB, or $LICVDB_READ_TIMEOUT seconds if set (> 0).
+double readTimeoutSeconds(uint64_t fileBytes);
+
+} // namespace vdbexport
