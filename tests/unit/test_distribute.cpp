@@ -68,6 +68,7 @@ protected:
         r.output.path = (sDir / "out.vdb").string();
         r.lic.length = 6;
         r.lic.brick = 16; // many bricks: 40³–48³ outputs
+        r.lic.engine = "fast"; // what bake() resolves "auto" to for noise
         return r;
     }
     static inline fs::path sDir;
