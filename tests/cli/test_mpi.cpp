@@ -5,7 +5,8 @@
 // field smaller than the whole; and faults: an error on one rank (bad input, out of memory, a
 // NaN only one rank reads), a killed rank (while convolving, and while rank 0 writes a loop),
 // a failing write on rank 0 — each ends the job with one clear message, a non-zero exit code and
-// no file, temporary or not. Fields are small (48×48×72 outputs in 16³ bricks).
+// no file, temporary or not; a corrupt .vdb refused on every rank by the read checks. Splat and
+// gather spots from parts of a long field. Fields are small (48×48×72 outputs in 16³ bricks).
 #include <gtest/gtest.h>
 
 #include "CliRun.h"
@@ -20,6 +21,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <set>
 #include <string>
 #include <vector>
@@ -234,6 +236,29 @@ TEST_F(MpiBake, EachRankReadsOnlyItsPartOfALongField)
     EXPECT_LT(held, 3 * whole) << "four parts hold less than three whole fields\n" << r4.out;
 }
 
+TEST_F(MpiBake, SplatSpotsOnALongFieldAreIdenticalFromPartsOfIt)
+{
+    // Splat (the default for spots) traces every spot within reach of a rank's bricks over its
+    // whole support: the widest margin; the gather engine (fast) for spots too.
+    for (const std::string engine : {"splat", "fast"}) {
+        const std::vector<std::string> args = {"--field", field("long.vdb"), "--brick", "16", "--length", "6",
+                                               "--input", "spots", "--spacing", "5", "--radii", "1,2",
+                                               "--width", "speed", "--color", "vorticity", "--engine", engine,
+                                               "--quiet", "--json"};
+        const RunResult r1 = bake(0, engine + "1.vdb", args);
+        ASSERT_EQ(r1.code, 0) << r1.describe();
+        const RunResult r3 = bake(3, engine + "3.vdb", args);
+        ASSERT_EQ(r3.code, 0) << r3.describe();
+        expectSameFiles(mOut / (engine + "1.vdb"), mOut / (engine + "3.vdb"), engine + " spots, long field");
+        EXPECT_EQ(counters(json::parse(r3.out)), counters(json::parse(r1.out))) << engine;
+        const json s = json::parse(r3.out);
+        ASSERT_TRUE(s["mpi"]["partial_read"].get<bool>()) << r3.out;
+        bool lessThanWhole = false;
+        for (const json& rank : s["ranks"]) lessThanWhole |= rank["field_voxels_held"].get<std::uint64_t>() < 16u * 16u * 96u;
+        EXPECT_TRUE(lessThanWhole) << engine << ": some rank holds less than the whole field\n" << r3.out;
+    }
+}
+
 TEST_F(MpiBake, AFourFrameLoopIsBitIdenticalInEveryFrame)
 {
     auto args = withField(kNoise, field());
@@ -339,6 +364,21 @@ TEST_F(MpiBake, AWriteFailureOnRankZeroEndsEveryRank)
     args.insert(args.end(), {"--frames", "4"});
     const RunResult r = bake(3, "out.vdb", args, "LICVDB_TEST_FAULT=0:writing frame 2:error");
     expectCleanFailure(r, 1, "rank 0 of 3 failed while writing: injected test fault");
+}
+
+TEST_F(MpiBake, ACorruptVdbIsRefusedByTheSameChecksOnEveryRank)
+{
+    // The .vdb read defences (docs/inputs.md) run on every rank before its clipped read: a file
+    // cut short is refused with exit 2 and one message, and nothing is written.
+    const std::string bytes = cli_test::readText(sDir / "long.vdb");
+    const fs::path cut = mOut.parent_path() / "cut.vdb";
+    {
+        std::ofstream out(cut, std::ios::binary);
+        out.write(bytes.data(), std::streamsize(bytes.size() - 100));
+    }
+    const RunResult r = bake(2, "out.vdb", withField(kNoise, cut.string()));
+    expectCleanFailure(r, 2, "expected an intact OpenVDB .vdb file");
+    EXPECT_EQ(r.err.find("licvdb bake: error"), r.err.rfind("licvdb bake: error")) << r.describe();
 }
 
 TEST_F(MpiBake, AFieldMissingOnEveryRankIsOneMessage)
