@@ -88,6 +88,16 @@ double peakRssMiB()
     return double(u.ru_maxrss) / 1024.0;
 }
 
+/// CPU time of this process so far (user + system, every thread), seconds: with the wall times,
+/// how much of a core a process had (a shared machine gives less than its threads ask for).
+double cpuSeconds()
+{
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    auto s = [](const timeval& t) { return double(t.tv_sec) + 1e-6 * double(t.tv_usec); };
+    return s(u.ru_utime) + s(u.ru_stime);
+}
+
 std::string hostName()
 {
     char name[256] = {};
@@ -330,7 +340,7 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     nlohmann::json rankJson = {
         {"rank", job.rank()}, {"host", hostName()}, {"bricks", mine.size()}, {"active_voxels", job.distributed() ? mineVoxels : st.voxels},
         {"field_voxels_held", share.voxelsHeld}, {"streamlines", st.streamlines}, {"samples", st.samples},
-        {"deposits", st.deposits}, {"peak_rss_mib", peakRssMiB()},
+        {"deposits", st.deposits}, {"peak_rss_mib", peakRssMiB()}, {"cpu_seconds", cpuSeconds()},
         {"seconds", {{"read", tRead}, {"input", tInput}, {"convolve", st.seconds}, {"compose", tCompose},
                      {"write", tWrite}, {"gather", tGather}, {"total", total}}}};
     std::uint64_t streamlines = st.streamlines, samples = st.samples, deposits = st.deposits;
@@ -368,6 +378,7 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
         {"raw_mean", raw.mean},
         {"raw_stddev", raw.stddev},
         {"peak_rss_mib", peakRssMiB()},
+        {"cpu_seconds", cpuSeconds()},
         {"seconds", {{"read", tRead}, {"input", tInput}, {"convolve", st.seconds}, {"compose", tCompose},
                      {"write", tWrite}, {"total", total}}},
     };

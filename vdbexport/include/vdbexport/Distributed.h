@@ -1,4 +1,4 @@
-// MPI for `licvdb bake` under mpirun or srun (a distributed bake: see docs/technique.md §5.5).
+// MPI for `licvdb bake` under mpirun or srun (a distributed bake: see docs/distributed.md).
 // The same binary runs without a launcher exactly as a single process: MPI is initialised only
 // when the process was started by an MPI launcher, and only when licvdb was built with MPI
 // (CMake option LICVDB_MPI).
