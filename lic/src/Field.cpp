@@ -78,9 +78,20 @@ FieldScan scanValues(const openvdb::Vec3SGrid& grid)
 VelocityField::VelocityField(openvdb::Vec3SGrid::ConstPtr grid)
     : mGrid(std::move(grid))
 {
+    init(nullptr);
+}
+
+VelocityField::VelocityField(openvdb::Vec3SGrid::ConstPtr grid, const FieldExtent& whole)
+    : mGrid(std::move(grid))
+{
+    init(&whole);
+}
+
+void VelocityField::init(const FieldExtent* whole)
+{
     if (!mGrid) throw InputError("no velocity grid given");
     const std::string name = mGrid->getName().empty() ? "velocity" : mGrid->getName();
-    mActiveVoxels = mGrid->activeVoxelCount();
+    mActiveVoxels = whole ? whole->activeVoxels : mGrid->activeVoxelCount();
     if (mActiveVoxels == 0) {
         throw InputError("velocity grid \"" + name + "\" has no active voxels: nothing to convolve");
     }
@@ -95,26 +106,37 @@ VelocityField::VelocityField(openvdb::Vec3SGrid::ConstPtr grid)
             << " NaN or infinite values (first at voxel " << scan.firstBad << ")";
         throw InputError(msg.str());
     }
-    mMaxSpeed = scan.maxSpeed;
+    mMaxSpeed = whole ? whole->maxSpeed : scan.maxSpeed;
     if (!(mMaxSpeed > 0)) {
         throw InputError("velocity grid \"" + name + "\" is zero everywhere: no flow to show");
     }
 
-    mBBox = mGrid->evalActiveVoxelBoundingBox();
-    const openvdb::Coord dim = mBBox.dim();
+    mBBox = whole ? whole->activeBox : mGrid->evalActiveVoxelBoundingBox();
+    mDenseBox = mBBox;
+    if (whole) {
+        mDenseBox.intersect(whole->region);
+        if (mDenseBox.empty()) {
+            std::ostringstream msg;
+            msg << "the part " << whole->region << " of velocity grid \"" << name
+                << "\" misses its active bounding box " << mBBox;
+            throw InputError(msg.str());
+        }
+    }
+    const openvdb::Coord dim = mDenseBox.dim();
     const double voxels = double(dim[0]) * dim[1] * dim[2];
     constexpr double kMaxDenseVoxels = double(1u << 28);
     if (voxels > kMaxDenseVoxels) {
         std::ostringstream msg;
         msg << "velocity grid \"" << name << "\" has an active bounding box of " << dim[0] << "x"
-            << dim[1] << "x" << dim[2] << " voxels (more than 2^28); crop or resample it";
+            << dim[1] << "x" << dim[2] << " voxels (more than 2^28); crop or resample it"
+            << (whole ? ", or share the bake among more processes (mpirun -np N)" : "");
         throw InputError(msg.str());
     }
     mDim = {size_t(dim[0]), size_t(dim[1]), size_t(dim[2])};
     mLo = mBBox.min().asVec3d() - openvdb::Vec3d(0.5);
     mHi = mBBox.max().asVec3d() + openvdb::Vec3d(0.5);
     {
-        openvdb::tools::Dense<openvdb::Vec3s, openvdb::tools::LayoutZYX> dense(mBBox, openvdb::Vec3s(0.0f));
+        openvdb::tools::Dense<openvdb::Vec3s, openvdb::tools::LayoutZYX> dense(mDenseBox, openvdb::Vec3s(0.0f));
         openvdb::tools::copyToDense(*mGrid, dense);
         mDense.resize(dense.valueCount());
         const openvdb::Vec3s* src = dense.data();

@@ -11,18 +11,32 @@ namespace lic {
 OutputDomain::OutputDomain(const VelocityField& field, int upsample)
     : mUpsample(upsample)
 {
+    init(field.transform(), field.indexBBox(), field.grid());
+}
+
+OutputDomain::OutputDomain(const openvdb::math::Transform& fieldTransform, const openvdb::CoordBBox& fieldActiveBox,
+                           const openvdb::MaskGrid& activity, int upsample)
+    : mUpsample(upsample)
+{
+    init(fieldTransform, fieldActiveBox, activity);
+}
+
+template<typename GridT>
+void OutputDomain::init(const openvdb::math::Transform& fieldTransform, const openvdb::CoordBBox& fb,
+                        const GridT& grid)
+{
+    const int upsample = mUpsample;
     if (upsample < 1 || upsample > 16) {
         throw InputError("upsample " + std::to_string(upsample) + " is out of range; expected 1..16");
     }
     const int K = upsample;
-    mTransform = field.transform().copy();
+    mTransform = fieldTransform.copy();
     mTransform->preTranslate(openvdb::Vec3d(0.5 / K - 0.5));
     mTransform->preScale(1.0 / K);
     mMap = AffineMap(*mTransform);
     const openvdb::Vec3d vs = mTransform->voxelSize();
     mVoxelSize = std::min({vs[0], vs[1], vs[2]});
 
-    const openvdb::CoordBBox& fb = field.indexBBox();
     mBBox = openvdb::CoordBBox(
         openvdb::Coord(fb.min()[0] * K, fb.min()[1] * K, fb.min()[2] * K),
         openvdb::Coord(fb.max()[0] * K + K - 1, fb.max()[1] * K + K - 1, fb.max()[2] * K + K - 1));
@@ -51,7 +65,6 @@ OutputDomain::OutputDomain(const VelocityField& field, int upsample)
     };
     // Activity of every candidate block, in parallel; then number the active blocks in order.
     std::vector<Mask> masks(nBlocks);
-    const openvdb::Vec3SGrid& grid = field.grid();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nBlocks), [&](const auto& r) {
         auto acc = grid.getConstAccessor();
         for (std::size_t b = r.begin(); b != r.end(); ++b) {

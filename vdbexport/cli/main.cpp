@@ -5,6 +5,7 @@
 // puts a machine-readable summary on stdout.
 
 #include "vdbexport/Bake.h"
+#include "vdbexport/Distributed.h"
 #include "vdbexport/Info.h"
 #include "vdbexport/Numbers.h"
 #include "vdbexport/Recipe.h"
@@ -25,6 +26,7 @@
 #include <filesystem>
 #include <cstdio>
 #include <iostream>
+#include <new>
 #include <sstream>
 
 namespace {
@@ -163,6 +165,8 @@ int main(int argc, char** argv)
     app.set_version_flag("--version", std::string("licvdb ") + LICVDB_VERSION);
     app.footer("Run `licvdb help CMD` for a command's options and examples.");
     std::string currentCommand = "licvdb";
+    // A distributed bake under mpirun/srun; started only for `bake` (see vdbexport/Distributed.h).
+    vdbexport::MpiSession mpi;
 
     // field ------------------------------------------------------------------------------------
     Common fieldCommon;
@@ -500,37 +504,50 @@ int main(int argc, char** argv)
             if (bake->get_option("--threads")->count()) r.threads = bakeCommon.threads;
             vdbexport::checkNotOverwritten(r, recipePath, "the recipe");
 
-            vdbexport::TerminalProgress progress(bakeCommon.quiet, stderr, false, bakeCommon.progressStyle());
+            // Under mpirun every rank runs this; rank 0 alone reports progress and the summary.
+            mpi.start(argc, argv);
+            const bool quiet = bakeCommon.quiet || mpi.rank() != 0;
+            vdbexport::TerminalProgress progress(quiet, stderr, false, bakeCommon.progressStyle());
             gProgress = &progress;
             const ProgressGuard progressGuard; // declared after `progress`, so destroyed first
             std::signal(SIGINT, onInterrupt);
             const nlohmann::json summary = vdbexport::bake(r, progress);
             progress.finishLine();
             gProgress = nullptr;
+            if (mpi.rank() != 0) return 0;
             if (!bakeCommon.quiet && summary.contains("field") && summary["field"].contains("notes"))
                 for (const auto& note : summary["field"]["notes"]) std::cerr << "licvdb bake: " << note.get<std::string>() << "\n";
             if (bakeCommon.json) {
                 std::cout << summary.dump(2) << "\n";
             } else if (!bakeCommon.quiet) {
-                std::fprintf(stderr, "wrote %s (%llu voxels, %.2f s)\n", r.output.path.c_str(),
+                std::fprintf(stderr, "wrote %s (%llu voxels, %.2f s%s)\n", r.output.path.c_str(),
                              (unsigned long long)summary["output_voxels"].get<std::uint64_t>(),
-                             summary["seconds"]["total"].get<double>());
+                             summary["seconds"]["total"].get<double>(),
+                             mpi.distributed() ? (", " + std::to_string(mpi.size()) + " ranks").c_str() : "");
             }
             return 0;
         }
     } catch (const lic::Cancelled&) {
         if (gProgress) gProgress->finishLine();
-        std::cerr << currentCommand << ": cancelled; no output written\n";
-        return 1;
+        if (mpi.reportsErrors()) std::cerr << currentCommand << ": cancelled; no output written\n";
+        return mpi.failed(1);
     } catch (const lic::InputError& e) {
         if (gProgress) gProgress->finishLine();
-        std::cerr << currentCommand << ": error: " << e.what() << "\n";
-        std::cerr << "see `licvdb help " << (currentCommand == "licvdb" ? "" : currentCommand.substr(7)) << "`\n";
-        return 2;
+        if (mpi.reportsErrors()) {
+            std::cerr << currentCommand << ": error: " << mpi.errorPrefix() << e.what() << "\n";
+            std::cerr << "see `licvdb help " << (currentCommand == "licvdb" ? "" : currentCommand.substr(7)) << "`\n";
+        }
+        return mpi.failed(2);
+    } catch (const std::bad_alloc&) {
+        if (gProgress) gProgress->finishLine();
+        if (mpi.reportsErrors())
+            std::cerr << currentCommand << ": error: " << mpi.errorPrefix() << "out of memory\n";
+        return mpi.failed(1);
     } catch (const std::exception& e) {
         if (gProgress) gProgress->finishLine();
-        std::cerr << currentCommand << ": error: " << e.what() << "\n";
-        return 1;
+        if (mpi.reportsErrors())
+            std::cerr << currentCommand << ": error: " << mpi.errorPrefix() << e.what() << "\n";
+        return mpi.failed(1);
     }
     return 0;
 }

@@ -1,6 +1,8 @@
 #include "vdbexport/Bake.h"
 
 #include "bake/Composite.h"
+#include "bake/Distribute.h"
+#include "bake/FieldShare.h"
 #include "bake/Input.h"
 #include "bake/Plan.h"
 #include "bake/Scalars.h"
@@ -15,7 +17,9 @@
 #include <openvdb/openvdb.h>
 
 #include <sys/resource.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -84,9 +88,55 @@ double peakRssMiB()
     return double(u.ru_maxrss) / 1024.0;
 }
 
+/// CPU time of this process so far (user + system, every thread), seconds: with the wall times,
+/// how much of a core a process had (a shared machine gives less than its threads ask for).
+double cpuSeconds()
+{
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    auto s = [](const timeval& t) { return double(t.tv_sec) + 1e-6 * double(t.tv_usec); };
+    return s(u.ru_utime) + s(u.ru_stime);
+}
+
+std::string hostName()
+{
+    char name[256] = {};
+    return gethostname(name, sizeof name - 1) == 0 ? std::string(name) : std::string("?");
+}
+
+/// A rank's progress through its share, shown as progress through the whole bake (the share
+/// of `part` units out of `whole` moves the bar from 0 to 1).
+class ShareProgress : public lic::Progress
+{
+public:
+    ShareProgress(lic::Progress& inner, std::uint64_t part, std::uint64_t whole)
+        : mInner(inner), mScale(part ? double(whole) / double(part) : 1.0)
+    {
+    }
+    void begin(const std::string& stage, std::uint64_t total) override { mInner.begin(stage, total); }
+    void advance(std::uint64_t units) override { mInner.advance(std::uint64_t(double(units) * mScale + 0.5)); }
+    void end() override { mInner.end(); }
+    bool wasInterrupted() override { return mInner.wasInterrupted(); }
+
+private:
+    lic::Progress& mInner;
+    double mScale;
+};
+
+/// Output-index box of some bricks, grown by `pad` voxels (an inverted, empty box for none).
+openvdb::BBoxd bricksBox(const lic::BrickLayout& layout, const std::vector<std::size_t>& ids, double pad)
+{
+    if (ids.empty()) return openvdb::BBoxd(openvdb::Vec3d(1.0), openvdb::Vec3d(0.0));
+    openvdb::CoordBBox box;
+    for (std::size_t id : ids) box.expand(layout[id].box);
+    return openvdb::BBoxd(box.min().asVec3d() - openvdb::Vec3d(pad), box.max().asVec3d() + openvdb::Vec3d(pad));
+}
+
 } // namespace
 
-// The pipeline of DESIGN.md, top to bottom; each stage lives in src/bake/.
+// The pipeline of DESIGN.md, top to bottom; each stage lives in src/bake/. In a distributed bake
+// (mpirun) every rank runs it on its share of the bricks and rank 0 writes (bake/Distribute.h);
+// in one process every Job call below is a no-op.
 nlohmann::json bake(const Recipe& request, lic::Progress& progress)
 {
     // The engine "auto" is resolved here, so the recipe a bake records names the engine it used.
@@ -95,47 +145,97 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     using Clock = std::chrono::steady_clock;
     auto seconds = [](Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); };
     const auto t0 = Clock::now();
+    pipeline::Job& job = pipeline::Job::current();
 
     // 1. Plan: every setting and every check that needs only the recipe.
-    const pipeline::Plan plan = pipeline::makePlan(recipe);
+    const pipeline::Plan plan = job.stage("planning the bake", [&] { return pipeline::makePlan(recipe); });
     openvdb::initialize();
 
     // 2. Field: any format (vdb, npy, vti, vtk, raw), prepared (NaN policy, crop, mask,
-    //    resample); the file's scalar grids come with it. The output domain and its bricks.
-    const LoadedField loaded = loadField(recipe.field);
-    const lic::VelocityField field(loaded.velocity);
-    const lic::OutputDomain domain(field, recipe.output.upsample);
-    const lic::BrickLayout layout(domain, lic::detail::brickDim(plan.settings));
+    //    resample); the file's scalar grids come with it. The output domain and its bricks, and
+    //    this process's share of them (all of them in one process; in a distributed bake only the
+    //    part of the field they need, where the format allows: see bake/FieldShare.h).
+    pipeline::FieldShare share =
+        job.stage("reading the field", [&] { return pipeline::readFieldShare(plan, job.rank(), job.size()); });
+    if (share.partial) {
+        const double maxSpeed = job.maxAll(share.extent.maxSpeed, "reading the field");
+        job.stage("reading the field", [&] { pipeline::makeField(share, maxSpeed); });
+    }
+    const LoadedField& loaded = share.loaded;
+    const lic::VelocityField& field = *share.field;
+    const lic::OutputDomain& domain = *share.domain;
+    const lic::BrickLayout& layout = *share.layout;
+    std::optional<lic::BrickLayout> mineLayout;
+    std::vector<std::uint32_t> mineBlocks;
+    std::uint64_t mineVoxels = 0;
+    if (job.distributed()) {
+        mineLayout.emplace(layout.subset(share.mine));
+        for (const lic::Brick& b : mineLayout->bricks()) {
+            mineBlocks.insert(mineBlocks.end(), b.blocks.begin(), b.blocks.end());
+            mineVoxels += b.activeVoxels;
+        }
+    }
+    const lic::BrickLayout& mine = job.distributed() ? *mineLayout : layout;
     const double tRead = seconds(t0);
 
-    // 3. Scalars by name, and the automatic ranges of width and colour (streamed percentiles).
+    // 3. Scalars by name, and the automatic ranges of width and colour (streamed percentiles;
+    //    distributed: each rank's histograms of its bricks, summed over the ranks).
     const auto t1 = Clock::now();
     pipeline::ScalarSet scalars(*loaded.velocity, loaded.scalars);
     pipeline::Ranges ranges;
-    if (recipe.width) {
-        ranges.width = recipe.width->range ? *recipe.width->range
-                                           : pipeline::autoRange(pipeline::ScalarField(scalars.get(recipe.width->scalar)), domain, recipe.threads);
-    }
     std::optional<lic::Colormap> cmap;
-    if (recipe.color) {
-        cmap = loadColormap(recipe.color->colormap);
-        ranges.color = recipe.color->range ? *recipe.color->range
-                                           : pipeline::autoRange(pipeline::ScalarField(scalars.get(recipe.color->scalar)), domain, recipe.threads);
-    }
+    const std::vector<std::uint32_t>* blocks = job.distributed() ? &mineBlocks : nullptr;
+    pipeline::HistogramReduce reduce;
+    if (job.distributed()) reduce = [&](std::vector<std::uint64_t>& h) { job.sumAll(h, "computing scalar ranges"); };
+    job.stage("computing scalar ranges", [&] {
+        if (recipe.width) {
+            ranges.width = recipe.width->range
+                               ? *recipe.width->range
+                               : pipeline::autoRange(pipeline::ScalarField(scalars.get(recipe.width->scalar)), domain, recipe.threads, blocks, reduce);
+        }
+        if (recipe.color) {
+            cmap = loadColormap(recipe.color->colormap);
+            ranges.color = recipe.color->range
+                               ? *recipe.color->range
+                               : pipeline::autoRange(pipeline::ScalarField(scalars.get(recipe.color->scalar)), domain, recipe.threads, blocks, reduce);
+        }
+    });
 
-    // 4. Input texture: spots placed once; noise made per brick.
-    pipeline::Input input = pipeline::makeInput(plan, domain, scalars);
+    // 4. Input texture: spots placed once (a rank keeps those near its bricks); noise made per brick.
+    pipeline::Input input = job.stage("making the input texture", [&] {
+        if (!job.distributed()) return pipeline::makeInput(plan, domain, scalars);
+        pipeline::SpotShare spotShare;
+        spotShare.reach = bricksBox(layout, share.mine, pipeline::spotReach(plan));
+        spotShare.ownBlocks.assign(domain.blockCount(), false);
+        for (std::uint32_t b : mineBlocks) spotShare.ownBlocks[b] = true;
+        return pipeline::makeInput(plan, domain, scalars, &spotShare);
+    });
+    const std::uint64_t spotCount = plan.spots ? job.sumAll(input.spotCount, "making the input texture") : 0;
     const double tInput = seconds(t1);
 
     // 5–6. Convolve each brick and composite it into leaves as it finishes.
-    pipeline::Compositor compositor(plan, field, domain, layout, scalars, input, cmap ? &*cmap : nullptr, ranges);
-    const lic::BrickSink sink = [&](const lic::BrickChannels& b) { compositor.consume(b); };
-    const lic::LicStats st =
-        plan.spots ? lic::convolveSpotBricks(field, domain, layout, input.spots, recipe.input.radii,
-                                             recipe.input.haloScale, plan.settings, progress, sink)
-                   : lic::convolveNoiseBricks(field, domain, layout, *input.noise, plan.settings, progress, sink);
+    std::optional<pipeline::Compositor> compositor;
+    job.stage("preparing the compositor", [&] {
+        compositor.emplace(plan, field, domain, layout, scalars, input, cmap ? &*cmap : nullptr, ranges);
+    });
+    const lic::BrickSink sink = [&](const lic::BrickChannels& b) { compositor->consume(b); };
+    ShareProgress shareProgress(progress, mineVoxels, domain.activeVoxelCount());
+    lic::Progress& convolveProgress = job.distributed() ? shareProgress : progress;
+    const lic::LicStats st = job.stage("convolving", [&] {
+        return plan.spots ? lic::convolveSpotBricks(field, domain, mine, input.spots, recipe.input.radii,
+                                                    recipe.input.haloScale, plan.settings, convolveProgress, sink)
+                          : lic::convolveNoiseBricks(field, domain, mine, *input.noise, plan.settings, convolveProgress, sink);
+    });
     const auto t2 = Clock::now();
-    compositor.finish();
+    if (job.distributed()) {
+        // Every rank merges every brick's contrast moments, in brick order: the same sums.
+        const std::vector<std::string> moments = job.allGather(compositor->packMoments(share.mine), "merging brick statistics");
+        job.stage("merging brick statistics", [&] {
+            for (int r = 0; r < job.size(); ++r)
+                if (r != job.rank()) compositor->unpackMoments(moments[std::size_t(r)]);
+        });
+    }
+    compositor->finish();
     const double tCompose = seconds(t2);
 
     // 7. Metadata, files, manifest.
@@ -160,10 +260,10 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     nlohmann::json spotsJson = nullptr;
     if (plan.spots) {
         const std::string placement = recipe.input.surface ? "surface" : recipe.input.distribution;
-        densityMeta.insertMeta("lic_spot_count", openvdb::Int64Metadata(openvdb::Int64(input.spots.centers.size())));
+        densityMeta.insertMeta("lic_spot_count", openvdb::Int64Metadata(openvdb::Int64(spotCount)));
         densityMeta.insertMeta("lic_spot_placement", openvdb::StringMetadata(placement));
         densityMeta.insertMeta("lic_halo_scale", openvdb::FloatMetadata(float(recipe.input.haloScale)));
-        spotsJson = {{"count", input.spots.centers.size()}, {"placement", placement},
+        spotsJson = {{"count", spotCount}, {"placement", placement},
                      {"spacing", recipe.input.spacing}, {"radii", recipe.input.radii},
                      {"halo_scale", recipe.input.haloScale}, {"line_peaks", plan.linePeak}, {"halo_peaks", plan.haloPeak}};
         if (recipe.width) {
@@ -184,12 +284,79 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
         colorJson = {{"scalar", recipe.color->scalar}, {"name", cmap->name()}, {"range", {ranges.color[0], ranges.color[1]}},
                      {"space", "sRGB"}, {"points", points}};
     }
-    const pipeline::Written written = pipeline::writeFrames(plan, compositor, densityMeta, progress);
-    pipeline::writeManifest(plan, written, domain.voxelSize(), resolved, colorJson, spotsJson);
+    pipeline::Written written;
+    double tGather = 0.0;
+    if (!job.distributed()) {
+        written = pipeline::writeFrames(plan, *compositor, densityMeta, progress);
+        pipeline::writeManifest(plan, written, domain.voxelSize(), resolved, colorJson, spotsJson);
+    } else {
+        // Each rank composes its leaves of every frame; rank 0 adds the others' and writes. The
+        // static grids (input, tangent, colour) travel with frame 1 only.
+        openvdb::GridPtrVec first; // held, so a later frame's grid cannot reuse an address
+        auto gather = [&](int f, openvdb::GridPtrVec& grids) {
+            std::vector<bool> skip(grids.size(), false);
+            if (f == 1) {
+                first = grids;
+            } else {
+                for (std::size_t i = 0; i < grids.size(); ++i)
+                    skip[i] = std::find(first.begin(), first.end(), grids[i]) != first.end();
+            }
+            const auto tg = Clock::now();
+            job.gatherLeaves(grids, skip);
+            tGather += seconds(tg);
+        };
+        if (job.root()) {
+            std::vector<std::string> framePaths;
+            for (int f = 1; f <= plan.frames; ++f) framePaths.push_back(framePath(recipe.output.path, f, plan.frames));
+            pipeline::WriteGuard guard(framePaths, manifestPath(recipe.output.path));
+            try {
+                job.injectFault("writing");
+                written = pipeline::writeFrames(plan, *compositor, densityMeta, progress, [&](int f, openvdb::GridPtrVec& grids) {
+                    const std::string what = "composing frame " + std::to_string(f);
+                    job.injectFault(what.c_str());
+                    job.agree(nullptr, what.c_str());
+                    gather(f, grids);
+                    job.injectFault(("writing frame " + std::to_string(f)).c_str());
+                });
+                pipeline::writeManifest(plan, written, domain.voxelSize(), resolved, colorJson, spotsJson);
+                guard.disarm();
+            } catch (...) {
+                if (job.failed()) throw;
+                job.agree(std::current_exception(), "writing");
+            }
+        } else {
+            for (int f = 1; f <= plan.frames; ++f) {
+                const std::string what = "composing frame " + std::to_string(f);
+                openvdb::GridPtrVec grids = job.stage(what.c_str(), [&] { return compositor->frame(f); });
+                gather(f, grids);
+            }
+        }
+        job.agree(nullptr, "writing");
+    }
     const double tWrite = seconds(t3);
 
-    const lic::ChannelStats& raw = compositor.rawStats();
-    return {
+    // Summary: counters summed over the ranks (each brick's are the same in any share).
+    const double total = seconds(t0);
+    nlohmann::json rankJson = {
+        {"rank", job.rank()}, {"host", hostName()}, {"bricks", mine.size()}, {"active_voxels", job.distributed() ? mineVoxels : st.voxels},
+        {"field_voxels_held", share.voxelsHeld}, {"streamlines", st.streamlines}, {"samples", st.samples},
+        {"deposits", st.deposits}, {"peak_rss_mib", peakRssMiB()}, {"cpu_seconds", cpuSeconds()},
+        {"seconds", {{"read", tRead}, {"input", tInput}, {"convolve", st.seconds}, {"compose", tCompose},
+                     {"write", tWrite}, {"gather", tGather}, {"total", total}}}};
+    std::uint64_t streamlines = st.streamlines, samples = st.samples, deposits = st.deposits;
+    nlohmann::json ranksJson = nlohmann::json::array();
+    if (job.distributed()) {
+        streamlines = samples = deposits = 0;
+        for (const std::string& text : job.allGather(rankJson.dump(), "summarising")) {
+            const nlohmann::json j = nlohmann::json::parse(text);
+            streamlines += j["streamlines"].get<std::uint64_t>();
+            samples += j["samples"].get<std::uint64_t>();
+            deposits += j["deposits"].get<std::uint64_t>();
+            ranksJson.push_back(j);
+        }
+    }
+    const lic::ChannelStats& raw = compositor->rawStats();
+    nlohmann::json summary = {
         {"output", recipe.output.path},
         {"files", written.paths},
         {"frames", plan.frames},
@@ -200,20 +367,29 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
         {"output_voxels", st.voxels},
         {"output_bbox", {{domain.indexBBox().min()[0], domain.indexBBox().min()[1], domain.indexBBox().min()[2]},
                          {domain.indexBBox().max()[0], domain.indexBBox().max()[1], domain.indexBBox().max()[2]}}},
-        {"streamlines", st.streamlines},
-        {"samples", st.samples},
-        {"samples_per_voxel", st.samplesPerVoxel()},
-        {"deposits", st.deposits},
-        {"bricks", st.bricks},
+        {"streamlines", streamlines},
+        {"samples", samples},
+        {"samples_per_voxel", st.voxels ? double(samples) / double(st.voxels) : 0.0},
+        {"deposits", deposits},
+        {"bricks", layout.size()},
         {"brick_size", st.brickDim},
         {"spots", spotsJson},
-        {"density_active_voxels", written.firstGrids.front()->activeVoxelCount()},
+        {"density_active_voxels", written.firstGrids.empty() ? 0 : written.firstGrids.front()->activeVoxelCount()},
         {"raw_mean", raw.mean},
         {"raw_stddev", raw.stddev},
         {"peak_rss_mib", peakRssMiB()},
+        {"cpu_seconds", cpuSeconds()},
         {"seconds", {{"read", tRead}, {"input", tInput}, {"convolve", st.seconds}, {"compose", tCompose},
-                     {"write", tWrite}, {"total", seconds(t0)}}},
+                     {"write", tWrite}, {"total", total}}},
     };
+    if (job.distributed()) {
+        summary["mpi"] = {{"ranks", job.size()},
+                          {"partial_read", share.partial},
+                          {"whole_read_reason", share.partial ? nlohmann::json(nullptr) : nlohmann::json(share.wholeReason)},
+                          {"assignment", "contiguous runs of bricks in Morton order, balanced by active voxels"}};
+        summary["ranks"] = ranksJson;
+    }
+    return summary;
 }
 
 } // namespace vdbexport

@@ -35,6 +35,20 @@ struct AffineMap
     }
 };
 
+/// What a VelocityField that holds only part of a field must know about the whole field (a rank's
+/// share of a distributed bake): its domain and zero-velocity threshold are the whole field's, so
+/// streamlines stop where they would in the whole field and the result is bit-identical.
+struct FieldExtent
+{
+    openvdb::CoordBBox activeBox;  ///< the whole field's active bounding box, index space, inclusive
+    openvdb::Index64 activeVoxels = 0; ///< the whole field's active voxels
+    double maxSpeed = 0.0;         ///< the whole field's largest |v|, world units per time
+    /// The part held, index space: values are copied over region ∩ activeBox only, and positions
+    /// outside it are clamped to it, so the caller must hold every voxel its traces can reach
+    /// (plus one for the trilinear footprint).
+    openvdb::CoordBBox region;
+};
+
 /// The velocity field of a bake: a Vec3 grid whose values are world-space vectors, placed in the
 /// world by the grid's transform.
 ///
@@ -54,6 +68,12 @@ public:
     ///        infinite values (the message counts them and names the first voxel), or is zero
     ///        everywhere.
     explicit VelocityField(openvdb::Vec3SGrid::ConstPtr grid);
+    /// A part of a larger field (see FieldExtent): `grid` holds at least the active voxels of
+    /// `whole.region` (e.g. read clipped to it); indexBBox(), the domain, maxSpeed() and
+    /// activeVoxelCount() are the whole field's.
+    /// @throw lic::InputError for NaN or infinite values in `grid`, a region that misses the
+    ///        whole field's active box, or a whole field that is empty or zero everywhere.
+    VelocityField(openvdb::Vec3SGrid::ConstPtr grid, const FieldExtent& whole);
 
     const openvdb::Vec3SGrid& grid() const { return *mGrid; }
     const openvdb::math::Transform& transform() const { return mGrid->transform(); }
@@ -125,12 +145,13 @@ private:
     /// Four floats (x, y, z, 0): one padded voxel, so the trilinear interpolation runs four lanes
     /// at a time.
     typedef float Float4 __attribute__((vector_size(16)));
-    /// Value at integer coordinate, clamped to the bounding box.
+    void init(const FieldExtent* whole);
+    /// Value at integer coordinate, clamped to the bounding box (of the part held).
     openvdb::Vec3s at(int i, int j, int k) const
     {
-        i = std::clamp(i, mBBox.min()[0], mBBox.max()[0]) - mBBox.min()[0];
-        j = std::clamp(j, mBBox.min()[1], mBBox.max()[1]) - mBBox.min()[1];
-        k = std::clamp(k, mBBox.min()[2], mBBox.max()[2]) - mBBox.min()[2];
+        i = std::clamp(i, mDenseBox.min()[0], mDenseBox.max()[0]) - mDenseBox.min()[0];
+        j = std::clamp(j, mDenseBox.min()[1], mDenseBox.max()[1]) - mDenseBox.min()[1];
+        k = std::clamp(k, mDenseBox.min()[2], mDenseBox.max()[2]) - mDenseBox.min()[2];
         const Float4& v = mData[(size_t(i) * mDim[1] + size_t(j)) * mDim[2] + size_t(k)];
         return openvdb::Vec3s(v[0], v[1], v[2]);
     }
@@ -139,7 +160,8 @@ private:
     AffineMap mMap;
     openvdb::Mat3d mIndexPerWorld; // linear part of world→index, for chain-rule derivatives
     bool mStaggered = false;
-    openvdb::CoordBBox mBBox;
+    openvdb::CoordBBox mBBox;     // active bounding box (of the whole field)
+    openvdb::CoordBBox mDenseBox; // box of the dense copy: mBBox, or a part of it
     openvdb::Vec3d mLo, mHi;
     std::array<size_t, 3> mDim{};
     // Dense copy of the active bbox (z fastest, padded to four floats): the sampling fast path,
@@ -156,7 +178,7 @@ private:
     const double fx = idx[0] - x, fy = idx[1] - y, fz = idx[2] - z;
     // Clamp each axis' two lattice indices once (as at() would per corner), then address the
     // eight corners by sums of per-axis offsets.
-    const int i = int(x) - mBBox.min()[0], j = int(y) - mBBox.min()[1], k = int(z) - mBBox.min()[2];
+    const int i = int(x) - mDenseBox.min()[0], j = int(y) - mDenseBox.min()[1], k = int(z) - mDenseBox.min()[2];
     const int nx = int(mDim[0]) - 1, ny = int(mDim[1]) - 1, nz = int(mDim[2]) - 1;
     const std::size_t sx = mDim[1] * mDim[2], sy = mDim[2];
     const std::size_t x0 = std::size_t(std::clamp(i, 0, nx)) * sx, x1 = std::size_t(std::clamp(i + 1, 0, nx)) * sx;

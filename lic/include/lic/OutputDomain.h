@@ -36,6 +36,12 @@ public:
     /// @param upsample output voxels per field voxel along each axis, in [1, 16].
     /// @throw lic::InputError for an upsample out of range or an output of more than 2^31 voxels.
     OutputDomain(const VelocityField& field, int upsample);
+    /// The same domain from the field's transform, active bounding box and active topology alone
+    /// (for a field too large to read whole: a distributed bake reads the topology first, and
+    /// then only the values its bricks need).
+    /// @throw lic::InputError as above.
+    OutputDomain(const openvdb::math::Transform& fieldTransform, const openvdb::CoordBBox& fieldActiveBox,
+                 const openvdb::MaskGrid& activity, int upsample);
 
     int upsample() const { return mUpsample; }
     const openvdb::math::Transform::Ptr& transform() const { return mTransform; }
@@ -111,6 +117,10 @@ public:
     }
 
 private:
+    template<typename GridT>
+    void init(const openvdb::math::Transform& fieldTransform, const openvdb::CoordBBox& fieldActiveBox,
+              const GridT& activity);
+
     int mUpsample;
     openvdb::math::Transform::Ptr mTransform;
     AffineMap mMap;

@@ -7,8 +7,11 @@
 
 #include <tbb/parallel_for.h>
 
+#include "lic/Error.h"
+
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace vdbexport::pipeline {
 
@@ -244,6 +247,29 @@ void Compositor::finish()
     mRaw.stddev = std::sqrt(std::max(0.0, all.sumSq / all.count - mRaw.mean * mRaw.mean));
     mRaw.min = all.lo;
     mRaw.max = all.hi;
+}
+
+std::string Compositor::packMoments(const std::vector<std::size_t>& ids) const
+{
+    std::string out;
+    for (std::size_t id : ids) {
+        const std::uint64_t i = id;
+        out.append(reinterpret_cast<const char*>(&i), sizeof i);
+        out.append(reinterpret_cast<const char*>(&mMoments.at(id)), sizeof(Moments));
+    }
+    return out;
+}
+
+void Compositor::unpackMoments(const std::string& bytes)
+{
+    constexpr std::size_t kRecord = sizeof(std::uint64_t) + sizeof(Moments);
+    if (bytes.size() % kRecord != 0) throw lic::Error("malformed brick statistics message");
+    for (std::size_t at = 0; at < bytes.size(); at += kRecord) {
+        std::uint64_t id = 0;
+        std::memcpy(&id, bytes.data() + at, sizeof id);
+        if (id >= mMoments.size()) throw lic::Error("brick statistics for brick " + std::to_string(id) + " out of range");
+        std::memcpy(&mMoments[id], bytes.data() + at + sizeof id, sizeof(Moments));
+    }
 }
 
 openvdb::GridPtrVec Compositor::frame(int f)

@@ -81,6 +81,12 @@ public:
     void consume(const lic::BrickChannels& bricks);
     /// After the last brick: merge the per-brick statistics in brick order (deterministic).
     void finish();
+    /// A distributed bake's per-brick statistics, before finish(): pack those of bricks `ids`
+    /// (this process's), and install those another process packed (exact bits, so every process
+    /// merges the same numbers in the same brick order).
+    std::string packMoments(const std::vector<std::size_t>& ids) const;
+    /// @throw lic::Error for a malformed message or a brick id out of range.
+    void unpackMoments(const std::string& bytes);
     /// Statistics of the raw frame-1 density over the active voxels (noise bakes).
     const lic::ChannelStats& rawStats() const { return mRaw; }
 

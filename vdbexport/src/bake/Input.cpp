@@ -16,7 +16,7 @@ namespace {
 /// active output voxels are kept; with a pre-mode ROI each spot is weighted by the mask at its
 /// centre and spots outside the region are dropped.
 lic::SpotSet makeSpotSet(const Recipe& r, const lic::OutputDomain& domain, openvdb::FloatGrid::ConstPtr roiPre,
-                         const openvdb::FloatGrid* surface)
+                         const openvdb::FloatGrid* surface, const SpotShare* share, std::uint64_t& owned)
 {
     std::vector<openvdb::Vec3d> centers;
     if (surface) {
@@ -38,27 +38,31 @@ lic::SpotSet makeSpotSet(const Recipe& r, const lic::OutputDomain& domain, openv
     std::optional<ScalarField> probe;
     if (roiPre) probe.emplace(roiPre);
     lic::SpotSet set;
+    owned = 0;
     for (const auto& c : centers) {
-        if (domain.slotOf(lic::OutputDomain::nearestVoxel(c)) < 0) continue;
+        if (share && !share->reach.isInside(c)) continue;
+        const openvdb::Coord nearest = lic::OutputDomain::nearestVoxel(c);
+        if (domain.slotOf(nearest) < 0) continue;
         float w = 1.0f;
         if (probe) w = lic::roiWeight(probe->at(domain.map().toWorld(c)), r.roi->range[0], r.roi->range[1]);
         if (w <= 0.0f) continue;
         set.centers.push_back(c);
         set.weights.push_back(w);
+        if (!share || share->ownBlocks[std::size_t(domain.blockOf(nearest))]) ++owned;
     }
     return set;
 }
 
 } // namespace
 
-Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& scalars)
+Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& scalars, const SpotShare* share)
 {
     const Recipe& r = plan.recipe;
     Input in;
     if (plan.spots) {
         openvdb::FloatGrid::ConstPtr roi = plan.roiPre ? scalars.get(r.roi->scalar) : nullptr;
         openvdb::FloatGrid::ConstPtr surface = r.input.surface ? scalars.get(r.input.surface->scalar) : nullptr;
-        in.spots = makeSpotSet(r, domain, roi, surface.get());
+        in.spots = makeSpotSet(r, domain, roi, surface.get(), share, in.spotCount);
         return in;
     }
     lic::NoiseBrickSource::Premask premask;

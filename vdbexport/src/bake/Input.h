@@ -10,17 +10,30 @@
 #include "lic/OutputDomain.h"
 #include "lic/Spots.h"
 
+#include <cstdint>
 #include <memory>
+#include <vector>
 
 namespace vdbexport::pipeline {
 
 struct Input
 {
     lic::SpotSet spots;                            ///< spot bakes: centres (output index) and weights
+    std::uint64_t spotCount = 0;                   ///< spot bakes: spots of this process's bricks
     std::unique_ptr<lic::NoiseBrickSource> noise;  ///< noise bakes: per-brick noise
 };
 
+/// A process's part of a distributed spot bake: it keeps only the spots that can touch its
+/// bricks (their textures are summed per cell in spot order, so dropping spots that add nothing
+/// leaves every value the same), and counts those whose centre lies in its own blocks.
+struct SpotShare
+{
+    openvdb::BBoxd reach;            ///< output index space: spots outside cannot touch the bricks
+    std::vector<bool> ownBlocks;     ///< per domain block: one of this process's bricks holds it
+};
+
+/// `share`: null for the whole bake (one process).
 /// @throw lic::InputError for a surface scalar without ridges above its threshold.
-Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& scalars);
+Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& scalars, const SpotShare* share = nullptr);
 
 } // namespace vdbexport::pipeline

@@ -12,21 +12,69 @@
 
 #include <bit>
 #include <cmath>
+#include <optional>
 #include <vector>
 
 namespace vdbexport::pipeline {
+
+namespace {
+const char* const kWholeBoxMin = "licvdb_whole_active_bbox_min";
+const char* const kWholeBoxMax = "licvdb_whole_active_bbox_max";
+const char* const kPartBoxMin = "licvdb_part_bbox_min";
+const char* const kPartBoxMax = "licvdb_part_bbox_max";
+
+std::optional<openvdb::CoordBBox> boxMeta(const openvdb::GridBase& grid, const char* lo, const char* hi)
+{
+    const auto a = grid.getMetadata<openvdb::Vec3IMetadata>(lo);
+    const auto b = grid.getMetadata<openvdb::Vec3IMetadata>(hi);
+    if (a && b) return openvdb::CoordBBox(openvdb::Coord(a->value()), openvdb::Coord(b->value()));
+    return std::nullopt;
+}
+} // namespace
+
+openvdb::CoordBBox activeBoxOf(const openvdb::GridBase& grid)
+{
+    if (auto b = boxMeta(grid, kWholeBoxMin, kWholeBoxMax)) return *b;
+    return grid.evalActiveVoxelBoundingBox();
+}
+
+openvdb::CoordBBox partBoxOf(const openvdb::GridBase& grid)
+{
+    if (auto b = boxMeta(grid, kPartBoxMin, kPartBoxMax)) return *b;
+    return activeBoxOf(grid);
+}
+
+bool isPart(const openvdb::GridBase& grid) { return boxMeta(grid, kWholeBoxMin, kWholeBoxMax).has_value(); }
+
+void setPartOf(openvdb::GridBase& grid, const openvdb::CoordBBox& whole, const openvdb::CoordBBox& part)
+{
+    grid.insertMeta(kWholeBoxMin, openvdb::Vec3IMetadata(whole.min().asVec3i()));
+    grid.insertMeta(kWholeBoxMax, openvdb::Vec3IMetadata(whole.max().asVec3i()));
+    grid.insertMeta(kPartBoxMin, openvdb::Vec3IMetadata(part.min().asVec3i()));
+    grid.insertMeta(kPartBoxMax, openvdb::Vec3IMetadata(part.max().asVec3i()));
+}
 
 openvdb::FloatGrid::ConstPtr ScalarSet::get(const std::string& name)
 {
     const std::lock_guard lock(mMutex);
     if (auto it = mCache.find(name); it != mCache.end()) return it->second;
     static const std::string kGradient = "-gradient";
+    const bool part = isPart(mVelocity);
     openvdb::FloatGrid::ConstPtr g;
     if (name.size() > kGradient.size() && name.ends_with(kGradient)) {
         const auto base = lic::resolveScalar(mVelocity, mFile, name.substr(0, name.size() - kGradient.size()));
-        g = lic::gradientMagnitude(*base, name);
+        auto grad = lic::gradientMagnitude(*base, name);
+        // Same active topology as its base: a part's boxes are the base's.
+        if (isPart(*base)) setPartOf(*grad, activeBoxOf(*base), partBoxOf(*base));
+        g = grad;
     } else {
         g = lic::resolveScalar(mVelocity, mFile, name);
+        if (part && !isPart(*g)) {
+            // Derived from a part of the velocity (file scalars carry their own boxes): the
+            // velocity's topology, so its boxes.
+            auto derived = openvdb::ConstPtrCast<openvdb::FloatGrid>(g);
+            setPartOf(*derived, activeBoxOf(mVelocity), partBoxOf(mVelocity));
+        }
     }
     return mCache[name] = g;
 }
@@ -34,9 +82,15 @@ openvdb::FloatGrid::ConstPtr ScalarSet::get(const std::string& name)
 ScalarField::ScalarField(openvdb::FloatGrid::ConstPtr grid)
     : mGrid(std::move(grid))
 {
-    const openvdb::CoordBBox bb = mGrid->evalActiveVoxelBoundingBox();
+    const bool part = isPart(*mGrid);
+    const openvdb::CoordBBox bb = part ? activeBoxOf(*mGrid) : mGrid->evalActiveVoxelBoundingBox();
     if (bb.empty()) throw lic::InputError("scalar grid \"" + mGrid->getName() + "\" has no active voxels");
-    const openvdb::Coord dim = bb.dim();
+    openvdb::CoordBBox held = bb; // the dense copy: the active box, or the part of it held here
+    if (part) {
+        held.intersect(partBoxOf(*mGrid));
+        if (held.empty()) held = openvdb::CoordBBox(bb.min(), bb.min());
+    }
+    const openvdb::Coord dim = held.dim();
     if (double(dim[0]) * dim[1] * dim[2] > double(1u << 28)) {
         throw lic::InputError("scalar grid \"" + mGrid->getName() + "\" has an active bounding box of more than 2^28 "
                               "voxels; crop or resample the field");
@@ -45,12 +99,13 @@ ScalarField::ScalarField(openvdb::FloatGrid::ConstPtr grid)
     for (int a = 0; a < 3; ++a) {
         mLo[a] = bb.min()[a];
         mHi[a] = bb.max()[a];
+        mOff[a] = held.min()[a] - bb.min()[a];
         mDim[a] = dim[a];
     }
     mStride[0] = std::size_t(dim[1]) * std::size_t(dim[2]);
     mStride[1] = std::size_t(dim[2]);
     mStride[2] = 1;
-    openvdb::tools::Dense<float, openvdb::tools::LayoutZYX> dense(bb, 0.0f);
+    openvdb::tools::Dense<float, openvdb::tools::LayoutZYX> dense(held, 0.0f);
     openvdb::tools::copyToDense(*mGrid, dense);
     mData.assign(dense.data(), dense.data() + dense.valueCount());
 }
@@ -70,13 +125,16 @@ using Histogram = std::vector<std::uint64_t>;
 /// A histogram of `bins` bins over the finite samples at every active output voxel: `add(key, h)`
 /// counts a sample's order key into h.
 template<typename Add>
-Histogram histogram(const ScalarField& scalar, const lic::OutputDomain& domain, int threads, std::size_t bins, Add add)
+Histogram histogram(const ScalarField& scalar, const lic::OutputDomain& domain, int threads, std::size_t bins,
+                    const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce, Add add)
 {
     tbb::combinable<Histogram> parts([bins] { return Histogram(bins, 0); });
+    const std::size_t count = blocks ? blocks->size() : domain.blockCount();
     lic::detail::runWithThreads(threads, [&] {
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, domain.blockCount()), [&](const auto& r) {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count), [&](const auto& r) {
             Histogram& h = parts.local();
-            for (std::size_t b = r.begin(); b != r.end(); ++b) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                const std::size_t b = blocks ? (*blocks)[i] : i;
                 const auto& mask = domain.blockMask(b);
                 for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off)) {
                     const float v = scalar.at(domain.worldOf(domain.coordOf(b * lic::OutputDomain::kBlockVoxels + off)));
@@ -89,6 +147,7 @@ Histogram histogram(const ScalarField& scalar, const lic::OutputDomain& domain, 
     parts.combine_each([&](const Histogram& h) {
         for (std::size_t i = 0; i < all.size(); ++i) all[i] += h[i]; // integer sums: any order
     });
+    if (reduce) reduce(all); // over the processes: integer sums again
     return all;
 }
 
@@ -107,9 +166,15 @@ std::pair<int, std::uint64_t> binOfRank(const Histogram& h, std::uint64_t k)
 
 std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDomain& domain, int threads)
 {
+    return autoRange(scalar, domain, threads, nullptr, {});
+}
+
+std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDomain& domain, int threads,
+                                const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce)
+{
     constexpr std::size_t kBins = 65536;
-    const Histogram coarse =
-        histogram(scalar, domain, threads, kBins, [](std::uint32_t key, Histogram& h) { ++h[key >> 16]; });
+    const Histogram coarse = histogram(scalar, domain, threads, kBins, blocks, reduce,
+                                       [](std::uint32_t key, Histogram& h) { ++h[key >> 16]; });
     std::uint64_t n = 0;
     for (std::uint64_t c : coarse) n += c;
     if (n == 0) return {0.0, 1.0};
@@ -120,7 +185,7 @@ std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDoma
     const auto [bin0, below0] = binOfRank(coarse, ranks[0]);
     const auto [bin1, below1] = binOfRank(coarse, ranks[1]);
     const std::uint32_t hb[2] = {std::uint32_t(bin0), std::uint32_t(bin1)};
-    const Histogram fine = histogram(scalar, domain, threads, 2 * kBins, [&hb](std::uint32_t key, Histogram& h) {
+    const Histogram fine = histogram(scalar, domain, threads, 2 * kBins, blocks, reduce, [&hb](std::uint32_t key, Histogram& h) {
         for (std::size_t i = 0; i < 2; ++i)
             if ((key >> 16) == hb[i]) ++h[i * kBins + (key & 0xffffu)];
     });

@@ -10,6 +10,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <string>
@@ -36,16 +38,31 @@ private:
     std::mutex mMutex;
 };
 
+/// The active bounding box of a scalar grid (index space): the box stored on it by
+/// setPartOf() when the grid holds only part of a field (a distributed bake's share), else the
+/// grid's own. Samples clamp positions to it, so a part samples like the whole.
+openvdb::CoordBBox activeBoxOf(const openvdb::GridBase& grid);
+/// The index box a part grid holds values for (setPartOf), else activeBoxOf(grid).
+openvdb::CoordBBox partBoxOf(const openvdb::GridBase& grid);
+/// Whether setPartOf() marked `grid` as a part.
+bool isPart(const openvdb::GridBase& grid);
+/// Record on `grid` that it holds the values over `part` (index space) of a whole grid whose
+/// active bounding box is `whole`.
+void setPartOf(openvdb::GridBase& grid, const openvdb::CoordBBox& whole, const openvdb::CoordBBox& part);
+
 /// A scalar grid prepared for sampling at many world positions: trilinear values, the position
 /// clamped to the grid's active bounding box (as the velocity sampler does: the outer half voxel
 /// repeats the edge value), from a dense copy of that box (like lic::VelocityField; ~5× faster
 /// than a value accessor and BoxSampler). Read-only after construction: share it between threads.
+/// For a part of a grid (a distributed bake, setPartOf) positions clamp to the whole grid's box
+/// and the dense copy holds only the part: the same arithmetic, so the same bits, wherever the
+/// part has values (a rank samples only inside its part; outside, the nearest part voxel).
 class ScalarField
 {
 public:
     ScalarField() = default;
-    /// @throw lic::InputError for a grid with no active voxels, or an active box of more than
-    ///        2^28 voxels (crop or resample the field).
+    /// @throw lic::InputError for a grid with no active voxels, or an active box (of a part: the
+    ///        part of it held) of more than 2^28 voxels (crop or resample the field).
     explicit ScalarField(openvdb::FloatGrid::ConstPtr grid);
     explicit operator bool() const { return bool(mGrid); }
     const openvdb::FloatGrid& grid() const { return *mGrid; }
@@ -58,7 +75,7 @@ public:
         for (int a = 0; a < 3; ++a) {
             const double x = std::clamp(idx[a], mLo[a], mHi[a]) - mLo[a];
             const double fl = std::floor(x);
-            const int i = int(fl);
+            const int i = std::clamp(int(fl) - mOff[a], 0, mDim[a] - 1); // mOff = 0 for a whole grid
             f[a] = x - fl;
             o0[a] = std::size_t(i) * mStride[a];
             o1[a] = std::size_t(std::min(i + 1, mDim[a] - 1)) * mStride[a];
@@ -75,8 +92,9 @@ public:
 private:
     openvdb::FloatGrid::ConstPtr mGrid;
     openvdb::Mat4d mWorldToIndex;
-    double mLo[3] = {}, mHi[3] = {};
-    int mDim[3] = {};
+    double mLo[3] = {}, mHi[3] = {}; ///< the (whole) active box, clamped to
+    int mOff[3] = {};                ///< first voxel of the dense copy, from mLo
+    int mDim[3] = {};                ///< voxels of the dense copy
     std::size_t mStride[3] = {};
     std::vector<float> mData;
 };
@@ -86,5 +104,13 @@ private:
 /// statistics from two passes of a 65 536-bin histogram over the values' order-preserving bits,
 /// so memory does not grow with the volume; deterministic for any thread count.
 std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDomain& domain, int threads);
+
+/// Sums histograms over the processes of a distributed bake, in place (Job::sumAll).
+using HistogramReduce = std::function<void(std::vector<std::uint64_t>&)>;
+/// autoRange() over the voxels of `blocks` only (a process's bricks; null = every block), with
+/// each histogram summed by `reduce` over the processes before the percentiles are read from
+/// it: integer counts, so the range is exactly that of one process over every block.
+std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDomain& domain, int threads,
+                                const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce);
 
 } // namespace vdbexport::pipeline

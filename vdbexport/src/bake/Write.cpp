@@ -22,7 +22,7 @@ openvdb::BBoxd worldBBoxOf(const openvdb::GridBase& grid)
 }
 
 Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::MetaMap& densityMeta,
-                    lic::Progress& progress)
+                    lic::Progress& progress, const FrameHook& gather)
 {
     const Recipe& r = plan.recipe;
     Written out;
@@ -33,6 +33,7 @@ Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::Met
         for (int f = 1; f <= plan.frames; ++f) {
             if (progress.wasInterrupted()) throw lic::Cancelled();
             openvdb::GridPtrVec grids = compositor.frame(f);
+            if (gather) gather(f, grids);
             openvdb::GridBase& density = *grids.front();
             for (auto it = densityMeta.beginMeta(); it != densityMeta.endMeta(); ++it) density.insertMeta(it->first, *it->second);
             density.insertMeta("lic_frame", openvdb::Int32Metadata(f));

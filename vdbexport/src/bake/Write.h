@@ -14,6 +14,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -27,9 +28,13 @@ struct Written
     std::shared_ptr<OutputSet> output;  ///< the staged frames, committed by writeManifest
 };
 
+/// Called with each frame's grids as composed here, before they are written: a distributed
+/// bake adds the other processes' leaves.
+using FrameHook = std::function<void(int frame, openvdb::GridPtrVec& grids)>;
+
 /// Write every frame: `densityMeta` goes on each frame's `density` grid, with `lic_frame`.
 Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::MetaMap& densityMeta,
-                    lic::Progress& progress);
+                    lic::Progress& progress, const FrameHook& gather = {});
 
 /// Write the sidecar manifest of a bake (with the frames' SHA-256), then commit the frames and
 /// the manifest together.

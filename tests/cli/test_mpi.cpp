@@ -1,0 +1,389 @@
+// Distributed bakes end to end: `mpirun --oversubscribe -np N licvdb bake …` (LICVDB_MPIEXEC)
+// against the same bake in one process, grid by grid and bit for bit (noise with colour, region
+// and every optional grid; spots with halos, three widths and colour; a 4-frame loop; 1 to 4
+// ranks, 1 or 2 threads each), the summary's counters and the manifest; a rank's part of the
+// field smaller than the whole; and faults: an error on one rank (bad input, out of memory, a
+// NaN only one rank reads), a killed rank (while convolving, and while rank 0 writes a loop),
+// a failing write on rank 0 — each ends the job with one clear message, a non-zero exit code and
+// no file, temporary or not; a corrupt .vdb refused on every rank by the read checks. Splat and
+// gather spots from parts of a long field. Fields are small (48×48×72 outputs in 16³ bricks).
+#include <gtest/gtest.h>
+
+#include "CliRun.h"
+#include "vdbexport/VdbIO.h"
+
+#include "lic/FieldPresets.h"
+
+#include <nlohmann/json.hpp>
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using cli_test::RunResult;
+
+namespace {
+
+class MpiBake : public ::testing::Test
+{
+protected:
+    static void SetUpTestSuite()
+    {
+        openvdb::initialize();
+        sDir = fs::temp_directory_path() / ("licvdb_mpi_" + std::to_string(::getpid()));
+        fs::create_directories(sDir / "logs");
+        const lic::PresetField jet = lic::makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36));
+        openvdb::GridPtrVec grids{jet.velocity};
+        for (const auto& s : jet.scalars) grids.push_back(s);
+        vdbexport::writeVdbAtomic((sDir / "jet.vdb").string(), grids);
+        // The same field with one NaN in a corner: only the ranks whose part holds it see it.
+        auto nan = openvdb::gridPtrCast<openvdb::Vec3SGrid>(jet.velocity->deepCopyGrid());
+        nan->tree().setValueOn(nan->evalActiveVoxelBoundingBox().max(), openvdb::Vec3s(std::nanf(""), 0.0f, 0.0f));
+        vdbexport::writeVdbAtomic((sDir / "nan.vdb").string(), {nan});
+        // A long field, so that a rank's part (its bricks ± the margin) is less than the whole.
+        const lic::PresetField abc = lic::makePresetField("abc", openvdb::Coord(16, 16, 96));
+        vdbexport::writeVdbAtomic((sDir / "long.vdb").string(), {abc.velocity});
+    }
+    static void TearDownTestSuite() { fs::remove_all(sDir); }
+
+    void SetUp() override
+    {
+        mOut = sDir / ::testing::UnitTest::GetInstance()->current_test_info()->name();
+        fs::create_directories(mOut);
+    }
+
+    /// `licvdb bake ARGS --out NAME` in one process (`ranks` = 0) or under mpirun.
+    RunResult bake(int ranks, const std::string& out, std::vector<std::string> args, const std::string& env = "")
+    {
+        args.insert(args.begin(), "bake");
+        args.push_back("--out");
+        args.push_back(out);
+        std::string cmd = cli_test::licvdbCommand(args);
+        if (ranks > 0) {
+            cmd = cli_test::shellQuote(LICVDB_MPIEXEC) + " --allow-run-as-root --oversubscribe -np " + std::to_string(ranks) +
+                  (env.empty() ? "" : " -x " + env.substr(0, env.find('='))) + " " + cmd;
+        }
+        if (!env.empty()) cmd = "env " + cli_test::shellQuote(env) + " " + cmd;
+        return cli_test::runShell(mOut, sDir / "logs", cmd);
+    }
+    std::string field(const std::string& name = "jet.vdb") const { return (sDir / name).string(); }
+
+    /// Names of the files in this test's directory.
+    std::set<std::string> files() const
+    {
+        std::set<std::string> names;
+        for (const auto& e : fs::directory_iterator(mOut)) names.insert(e.path().filename().string());
+        return names;
+    }
+
+    /// The job failed with exit `code`, stderr holds `text`, and nothing is left behind.
+    void expectCleanFailure(const RunResult& r, int code, const std::string& text) const
+    {
+        EXPECT_EQ(r.code, code) << r.describe();
+        EXPECT_NE(r.err.find(text), std::string::npos) << r.describe();
+        const std::set<std::string> left = files();
+        EXPECT_TRUE(left.empty()) << "left behind: " << (left.empty() ? "" : *left.begin()) << "\n" << r.describe();
+    }
+
+    static inline fs::path sDir;
+    fs::path mOut;
+};
+
+openvdb::GridPtrVec readAll(const fs::path& path)
+{
+    openvdb::io::File file(path.string());
+    file.open();
+    openvdb::GridPtrVec grids;
+    for (auto it = file.beginName(); it != file.endName(); ++it) grids.push_back(file.readGrid(it.gridName()));
+    return grids;
+}
+
+/// Same topology and the same bits in every active voxel; the grid's own metadata equal except
+/// what OpenVDB adds on writing.
+template<typename GridT>
+std::string compareGrid(const openvdb::GridBase& a, const openvdb::GridBase& b)
+{
+    const auto& ga = static_cast<const GridT&>(a);
+    const auto& gb = static_cast<const GridT&>(b);
+    if (!ga.tree().hasSameTopology(gb.tree())) return "topology differs";
+    auto acc = gb.getConstAccessor();
+    std::size_t differ = 0;
+    for (auto it = ga.cbeginValueOn(); it; ++it) {
+        const auto va = *it, vb = acc.getValue(it.getCoord());
+        if (std::memcmp(&va, &vb, sizeof va) != 0) ++differ;
+    }
+    if (differ) return std::to_string(differ) + " voxels differ";
+    for (auto m = a.beginMeta(); m != a.endMeta(); ++m) {
+        if (m->first.rfind("file_", 0) == 0 || m->first == "licvdb_recipe") continue; // the recipe names the output
+        const auto other = b[m->first];
+        if (!other || other->str() != m->second->str()) return "metadata " + m->first + " differs";
+    }
+    return "";
+}
+
+/// Every grid of two bakes' files: names, order, bits.
+void expectSameFiles(const fs::path& a, const fs::path& b, const std::string& what)
+{
+    const openvdb::GridPtrVec ga = readAll(a), gb = readAll(b);
+    ASSERT_EQ(ga.size(), gb.size()) << what;
+    ASSERT_GE(ga.size(), 1u) << what;
+    for (std::size_t i = 0; i < ga.size(); ++i) {
+        ASSERT_EQ(ga[i]->getName(), gb[i]->getName()) << what;
+        const std::string diff = ga[i]->isType<openvdb::FloatGrid>() ? compareGrid<openvdb::FloatGrid>(*ga[i], *gb[i])
+                                                                    : compareGrid<openvdb::Vec3SGrid>(*ga[i], *gb[i]);
+        EXPECT_EQ(diff, "") << what << ": grid " << ga[i]->getName();
+        EXPECT_GT(ga[i]->activeVoxelCount(), 1000u) << what << ": grid " << ga[i]->getName();
+    }
+}
+
+/// The parts of a summary that must not depend on the rank count. The splat engine traces each
+/// spot on every rank its footprint reaches, so its streamlines and samples summed over the ranks
+/// count those spots once per rank (the distribution's extra work): left out for splat.
+json counters(const json& s)
+{
+    const bool splat = s["engine"] == "splat";
+    return {s["output_voxels"], splat ? json() : s["streamlines"], splat ? json() : s["samples"], s["deposits"],
+            s["bricks"], s["brick_size"], s["spots"], s["raw_mean"], s["raw_stddev"], s["density_active_voxels"],
+            s["field"]["active_voxels"], s["field"]["world_bbox"], s["frames"], s["engine"]};
+}
+
+/// A manifest without the names that differ by the output path.
+json manifestCore(const fs::path& p)
+{
+    json m = json::parse(cli_test::readText(p));
+    m["recipe"]["output"].erase("path");
+    m["recipe"].erase("threads"); // threads per rank may differ between the runs compared
+    m.erase("files");
+    m.erase("sha256"); // of files whose recipe metadata names their own path
+    return m;
+}
+
+const std::vector<std::string> kNoise = {"--field", "", "--brick", "16", "--length", "8", "--color", "vorticity",
+                                         "--write-tangent", "--write-input", "--roi", "speed", "--roi-range", "0.3,5",
+                                         "--quiet", "--json"};
+
+std::vector<std::string> withField(std::vector<std::string> args, const std::string& field)
+{
+    args[1] = field;
+    return args;
+}
+
+} // namespace
+
+TEST_F(MpiBake, NoiseIsBitIdenticalToOneProcessForOneToFourRanks)
+{
+    const auto args = withField(kNoise, field());
+    auto one = args;
+    one.insert(one.end(), {"--threads", "1"});
+    const RunResult r1 = bake(0, "one.vdb", one);
+    ASSERT_EQ(r1.code, 0) << r1.describe();
+    const json s1 = json::parse(r1.out);
+    ASSERT_GE(s1["bricks"].get<int>(), 30);
+    for (const auto& [ranks, threads] : std::vector<std::pair<int, int>>{{3, 1}, {1, 1}, {2, 2}, {4, 1}}) {
+        const std::string name = "np" + std::to_string(ranks) + "_t" + std::to_string(threads) + ".vdb";
+        auto a = args;
+        a.insert(a.end(), {"--threads", std::to_string(threads)});
+        const RunResult r = bake(ranks, name, a);
+        ASSERT_EQ(r.code, 0) << r.describe();
+        const json s = json::parse(r.out); // one summary: rank 0 alone prints
+        expectSameFiles(mOut / "one.vdb", mOut / name, name);
+        EXPECT_EQ(counters(s), counters(s1)) << name;
+        EXPECT_EQ(manifestCore(mOut / ("np" + std::to_string(ranks) + "_t" + std::to_string(threads) + ".json")),
+                  manifestCore(mOut / "one.json"))
+            << name;
+        if (ranks > 1) {
+            ASSERT_EQ(s["ranks"].size(), std::size_t(ranks)) << r.out;
+            EXPECT_TRUE(s["mpi"]["partial_read"].get<bool>()) << r.out;
+            std::uint64_t bricks = 0, least = ~std::uint64_t(0);
+            for (const json& rank : s["ranks"]) {
+                bricks += rank["bricks"].get<std::uint64_t>();
+                least = std::min(least, rank["field_voxels_held"].get<std::uint64_t>());
+                EXPECT_GT(rank["seconds"]["convolve"].get<double>(), 0.0);
+            }
+            EXPECT_EQ(bricks, s1["bricks"].get<std::uint64_t>());
+            EXPECT_LE(least, 24u * 24u * 36u) << r.out; // the whole field here: see the long field below
+        }
+    }
+}
+
+TEST_F(MpiBake, EachRankReadsOnlyItsPartOfALongField)
+{
+    const std::vector<std::string> args = {"--field", field("long.vdb"), "--brick", "16", "--length", "8",
+                                           "--color", "q-criterion", "--quiet", "--json"};
+    const RunResult r1 = bake(0, "one.vdb", args);
+    ASSERT_EQ(r1.code, 0) << r1.describe();
+    const RunResult r4 = bake(4, "four.vdb", args);
+    ASSERT_EQ(r4.code, 0) << r4.describe();
+    expectSameFiles(mOut / "one.vdb", mOut / "four.vdb", "long field");
+    const json s = json::parse(r4.out);
+    ASSERT_TRUE(s["mpi"]["partial_read"].get<bool>()) << r4.out;
+    std::uint64_t held = 0;
+    const std::uint64_t whole = 16u * 16u * 96u;
+    for (const json& rank : s["ranks"]) {
+        EXPECT_LT(rank["field_voxels_held"].get<std::uint64_t>(), whole) << r4.out;
+        held += rank["field_voxels_held"].get<std::uint64_t>();
+    }
+    EXPECT_LT(held, 3 * whole) << "four parts hold less than three whole fields\n" << r4.out;
+}
+
+TEST_F(MpiBake, SplatSpotsOnALongFieldAreIdenticalFromPartsOfIt)
+{
+    // Splat (the default for spots) traces every spot within reach of a rank's bricks over its
+    // whole support: the widest margin; the gather engine (fast) for spots too.
+    for (const std::string engine : {"splat", "fast"}) {
+        const std::vector<std::string> args = {"--field", field("long.vdb"), "--brick", "16", "--length", "6",
+                                               "--input", "spots", "--spacing", "5", "--radii", "1,2",
+                                               "--width", "speed", "--color", "vorticity", "--engine", engine,
+                                               "--quiet", "--json"};
+        const RunResult r1 = bake(0, engine + "1.vdb", args);
+        ASSERT_EQ(r1.code, 0) << r1.describe();
+        const RunResult r3 = bake(3, engine + "3.vdb", args);
+        ASSERT_EQ(r3.code, 0) << r3.describe();
+        expectSameFiles(mOut / (engine + "1.vdb"), mOut / (engine + "3.vdb"), engine + " spots, long field");
+        EXPECT_EQ(counters(json::parse(r3.out)), counters(json::parse(r1.out))) << engine;
+        const json s = json::parse(r3.out);
+        ASSERT_TRUE(s["mpi"]["partial_read"].get<bool>()) << r3.out;
+        bool lessThanWhole = false;
+        for (const json& rank : s["ranks"]) lessThanWhole |= rank["field_voxels_held"].get<std::uint64_t>() < 16u * 16u * 96u;
+        EXPECT_TRUE(lessThanWhole) << engine << ": some rank holds less than the whole field\n" << r3.out;
+    }
+}
+
+TEST_F(MpiBake, AFourFrameLoopIsBitIdenticalInEveryFrame)
+{
+    auto args = withField(kNoise, field());
+    args.insert(args.end(), {"--frames", "4"});
+    const RunResult r1 = bake(0, "one.vdb", args);
+    ASSERT_EQ(r1.code, 0) << r1.describe();
+    const RunResult r3 = bake(3, "three.vdb", args);
+    ASSERT_EQ(r3.code, 0) << r3.describe();
+    EXPECT_EQ(counters(json::parse(r3.out)), counters(json::parse(r1.out)));
+    for (int f = 1; f <= 4; ++f) {
+        const std::string suffix = "_000" + std::to_string(f) + ".vdb";
+        expectSameFiles(mOut / ("one" + suffix), mOut / ("three" + suffix), "frame " + std::to_string(f));
+    }
+    EXPECT_EQ(manifestCore(mOut / "three.json"), manifestCore(mOut / "one.json"));
+}
+
+TEST_F(MpiBake, SpotsWithHalosWidthsAndColourAreBitIdentical)
+{
+    const std::vector<std::string> args = {"--field", field(), "--brick", "16", "--length", "8", "--input", "spots",
+                                           "--spacing", "6", "--radii", "1,1.5,2", "--width", "speed", "--color",
+                                           "temperature", "--colormap", "heated-object", "--write-series",
+                                           "--write-tangent", "--quiet", "--json"};
+    const RunResult r1 = bake(0, "one.vdb", args);
+    ASSERT_EQ(r1.code, 0) << r1.describe();
+    const RunResult r3 = bake(3, "three.vdb", args);
+    ASSERT_EQ(r3.code, 0) << r3.describe();
+    expectSameFiles(mOut / "one.vdb", mOut / "three.vdb", "spots");
+    EXPECT_EQ(counters(json::parse(r3.out)), counters(json::parse(r1.out)));
+    EXPECT_GT(json::parse(r1.out)["spots"]["count"].get<int>(), 100);
+    EXPECT_EQ(manifestCore(mOut / "three.json"), manifestCore(mOut / "one.json"));
+    // A spot loop too: every frame of line and halo.
+    auto loop = args;
+    loop.insert(loop.end(), {"--frames", "3"});
+    ASSERT_EQ(bake(0, "loop1.vdb", loop).code, 0);
+    const RunResult l3 = bake(3, "loop3.vdb", loop);
+    ASSERT_EQ(l3.code, 0) << l3.describe();
+    for (int f = 1; f <= 3; ++f) {
+        const std::string suffix = "_000" + std::to_string(f) + ".vdb";
+        expectSameFiles(mOut / ("loop1" + suffix), mOut / ("loop3" + suffix), "spot loop frame " + std::to_string(f));
+    }
+}
+
+TEST_F(MpiBake, AFieldThatNeedsTheWholeFileIsReadWholeAndStillIdentical)
+{
+    auto args = withField(kNoise, field());
+    args.insert(args.end(), {"--mask", "zero"});
+    const RunResult r1 = bake(0, "one.vdb", args);
+    ASSERT_EQ(r1.code, 0) << r1.describe();
+    const RunResult r3 = bake(3, "three.vdb", args);
+    ASSERT_EQ(r3.code, 0) << r3.describe();
+    const json s = json::parse(r3.out);
+    EXPECT_FALSE(s["mpi"]["partial_read"].get<bool>());
+    EXPECT_NE(s["mpi"]["whole_read_reason"].get<std::string>().find("mask"), std::string::npos) << r3.out;
+    expectSameFiles(mOut / "one.vdb", mOut / "three.vdb", "mask zero");
+}
+
+// ---- faults ---------------------------------------------------------------------------------
+
+TEST_F(MpiBake, BadInputOnOneRankEndsTheJobWithExitTwoAndOneMessage)
+{
+    const RunResult r = bake(3, "out.vdb", withField(kNoise, field()), "LICVDB_TEST_FAULT=1:reading:input");
+    expectCleanFailure(r, 2, "licvdb bake: error: rank 1 of 3 failed while reading the field: injected test fault");
+    std::size_t n = 0;
+    for (std::size_t at = r.err.find("licvdb bake: error"); at != std::string::npos; at = r.err.find("licvdb bake: error", at + 1)) ++n;
+    EXPECT_EQ(n, 1u) << r.describe();
+}
+
+TEST_F(MpiBake, ANaNThatOnlyOneRankReadsFailsTheWholeJob)
+{
+    // The corner voxel lies in the last bricks' part only; every rank leaves with exit 2.
+    const RunResult r = bake(3, "out.vdb", withField(kNoise, field("nan.vdb")));
+    expectCleanFailure(r, 2, "NaN or infinite");
+    EXPECT_NE(r.err.find("failed while reading the field"), std::string::npos) << r.describe();
+}
+
+TEST_F(MpiBake, OutOfMemoryOnOneRankEndsTheJobWithExitOne)
+{
+    const RunResult r = bake(3, "out.vdb", withField(kNoise, field()), "LICVDB_TEST_FAULT=2:convolving:oom");
+    expectCleanFailure(r, 1, "rank 2 of 3 failed while convolving: out of memory");
+}
+
+TEST_F(MpiBake, AKilledRankEndsTheJob)
+{
+    const RunResult r = bake(3, "out.vdb", withField(kNoise, field()), "LICVDB_TEST_FAULT=1:convolving:kill");
+    EXPECT_NE(r.code, 0) << r.describe();
+    EXPECT_NE(r.err.find("signal 9"), std::string::npos) << r.describe(); // mpirun names the rank and signal
+    EXPECT_TRUE(files().empty()) << r.describe();
+}
+
+TEST_F(MpiBake, ARankKilledWhileRankZeroWritesALoopLeavesNoFrame)
+{
+    auto args = withField(kNoise, field());
+    args.insert(args.end(), {"--frames", "4"});
+    // Rank 0 has written frames 1 and 2 when rank 1 dies composing frame 3.
+    const RunResult r = bake(3, "out.vdb", args, "LICVDB_TEST_FAULT=1:composing frame 3:kill");
+    EXPECT_NE(r.code, 0) << r.describe();
+    EXPECT_TRUE(files().empty()) << "left behind: " << (files().empty() ? "" : *files().begin()) << "\n" << r.describe();
+}
+
+TEST_F(MpiBake, AWriteFailureOnRankZeroEndsEveryRank)
+{
+    auto args = withField(kNoise, field());
+    args.insert(args.end(), {"--frames", "4"});
+    const RunResult r = bake(3, "out.vdb", args, "LICVDB_TEST_FAULT=0:writing frame 2:error");
+    expectCleanFailure(r, 1, "rank 0 of 3 failed while writing: injected test fault");
+}
+
+TEST_F(MpiBake, ACorruptVdbIsRefusedByTheSameChecksOnEveryRank)
+{
+    // The .vdb read defences (docs/inputs.md) run on every rank before its clipped read: a file
+    // cut short is refused with exit 2 and one message, and nothing is written.
+    const std::string bytes = cli_test::readText(sDir / "long.vdb");
+    const fs::path cut = mOut.parent_path() / "cut.vdb";
+    {
+        std::ofstream out(cut, std::ios::binary);
+        out.write(bytes.data(), std::streamsize(bytes.size() - 100));
+    }
+    const RunResult r = bake(2, "out.vdb", withField(kNoise, cut.string()));
+    expectCleanFailure(r, 2, "expected an intact OpenVDB .vdb file");
+    EXPECT_EQ(r.err.find("licvdb bake: error"), r.err.rfind("licvdb bake: error")) << r.describe();
+}
+
+TEST_F(MpiBake, AFieldMissingOnEveryRankIsOneMessage)
+{
+    const RunResult r = bake(3, "out.vdb", withField(kNoise, (sDir / "missing.vdb").string()));
+    expectCleanFailure(r, 2, "missing.vdb");
+    EXPECT_EQ(r.err.find("licvdb bake: error"), r.err.rfind("licvdb bake: error")) << r.describe();
+}

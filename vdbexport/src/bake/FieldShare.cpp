@@ -1,0 +1,296 @@
+#include "FieldShare.h"
+
+#include "Distribute.h"
+#include "Scalars.h"
+
+#include "DenseCommon.h"
+#include "vdbexport/VdbIO.h"
+
+#include "lic/Engine.h"
+#include "lic/Error.h"
+
+#include <openvdb/io/File.h>
+#include <openvdb/tree/LeafManager.h>
+
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace vdbexport::pipeline {
+
+namespace {
+
+const std::string kVec3s = openvdb::typeNameAsString<openvdb::Vec3s>();
+const std::string kFloat = openvdb::typeNameAsString<float>();
+const std::string kDouble = openvdb::typeNameAsString<double>();
+
+/// Why this recipe and field must be read whole on every rank ("" when a part will do); the
+/// velocity grid's name in `velName`. Resolves the grid as readVelocityGrid() does, and leaves
+/// every case it would convert or combine (vec3d, split components) to the whole read.
+std::string wholeReadReason(const Recipe& r, std::string& velName)
+{
+    std::string format;
+    try {
+        format = r.field.format.empty() || r.field.format == "auto" ? formatFromPath(r.field.path) : r.field.format;
+    } catch (const lic::InputError&) {
+        return "the field's format is not known"; // the whole read reports it
+    }
+    if (format != "vdb") return "a ." + format + " field has no partial read";
+    if (r.field.crop) return "field.crop needs the whole field";
+    if (r.field.resample) return "field.resample needs the whole field";
+    if (r.field.mask == "zero") return "field.mask \"zero\" needs the whole field";
+    if (r.field.nanPolicy == "zero") return "field.nan_policy \"zero\" needs the whole field";
+    if (r.input.surface) return "input.surface places spots over the whole field";
+
+    detail::VdbReader reader(r.field.path);
+    const auto grids = reader.gridTypes();
+    auto typeOf = [&](const std::string& n) -> std::string {
+        for (const auto& [name, type] : grids)
+            if (name == n) return type;
+        return "";
+    };
+    if (!r.field.grid.empty()) {
+        velName = r.field.grid;
+    } else {
+        for (const char* n : kDefaultVelocityNames)
+            if (velName.empty() && detail::isVec3Type(typeOf(n))) velName = n;
+        if (velName.empty()) {
+            std::vector<std::string> vec3;
+            for (const auto& [name, type] : grids)
+                if (detail::isVec3Type(type)) vec3.push_back(name);
+            if (vec3.size() == 1) velName = vec3.front();
+        }
+    }
+    if (velName.empty() || typeOf(velName) != kVec3s) return "the velocity is not one vec3s grid";
+    for (const auto& [name, type] : grids) {
+        if (type == kDouble) return "the field file has double-precision scalar grids";
+        if (std::count_if(grids.begin(), grids.end(), [&](const auto& g) { return g.first == name; }) > 1)
+            return "the field file has two grids named " + name;
+    }
+    return "";
+}
+
+/// Index box (of a grid with transform `xform`) that holds the world box `world`, grown by `pad` voxels.
+openvdb::CoordBBox indexBoxOf(const openvdb::math::Transform& xform, const openvdb::BBoxd& world, int pad)
+{
+    openvdb::Vec3d lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+    for (int c = 0; c < 8; ++c) {
+        const openvdb::Vec3d w((c & 1) ? world.max()[0] : world.min()[0], (c & 2) ? world.max()[1] : world.min()[1],
+                               (c & 4) ? world.max()[2] : world.min()[2]);
+        const openvdb::Vec3d i = xform.worldToIndex(w);
+        lo = openvdb::math::minComponent(lo, i);
+        hi = openvdb::math::maxComponent(hi, i);
+    }
+    auto clampInt = [](double v) { return int(std::clamp(v, -1e9, 1e9)); };
+    return openvdb::CoordBBox(
+        openvdb::Coord(clampInt(std::floor(lo[0])) - pad, clampInt(std::floor(lo[1])) - pad, clampInt(std::floor(lo[2])) - pad),
+        openvdb::Coord(clampInt(std::ceil(hi[0])) + pad, clampInt(std::ceil(hi[1])) + pad, clampInt(std::ceil(hi[2])) + pad));
+}
+
+/// World box of an index box's voxel extents.
+openvdb::BBoxd worldBoxOf(const openvdb::math::Transform& xform, const openvdb::CoordBBox& box)
+{
+    return xform.indexToWorld(openvdb::BBoxd(box.min().asVec3d() - openvdb::Vec3d(0.5), box.max().asVec3d() + openvdb::Vec3d(0.5)));
+}
+
+double localMaxSpeed(const openvdb::Vec3SGrid& grid)
+{
+    openvdb::tree::LeafManager<const openvdb::Vec3STree> leaves(grid.tree());
+    double m = tbb::parallel_reduce(
+        leaves.leafRange(), 0.0,
+        [](const auto& range, double acc) {
+            for (auto leaf = range.begin(); leaf; ++leaf)
+                for (auto it = leaf->cbeginValueOn(); it; ++it)
+                    if (std::isfinite((*it)[0]) && std::isfinite((*it)[1]) && std::isfinite((*it)[2]))
+                        acc = std::max(acc, double(it->length()));
+            return acc;
+        },
+        [](double a, double b) { return std::max(a, b); });
+    for (auto it = grid.tree().cbeginValueOn(); it; ++it) // active tiles
+        if (!it.isVoxelValue() && std::isfinite((*it)[0]) && std::isfinite((*it)[1]) && std::isfinite((*it)[2]))
+            m = std::max(m, double(it->length()));
+    return m;
+}
+
+/// The part of a distributed bake: topology, domain, share, then the clipped grids.
+void readPart(const Plan& plan, int rank, int ranks, const std::string& velName, FieldShare& s)
+{
+    const Recipe& r = plan.recipe;
+    const std::string& path = r.field.path;
+    // The same read defences as every other read (docs/inputs.md): the whole file's structure
+    // checked, then read once in a child process, before OpenVDB opens it here (remembered for the
+    // unchanged file: wholeReadReason() already did it through a VdbReader). Grids of types
+    // licvdb does not read are never touched.
+    const VdbCheckResult check = detail::checkedVdb(path);
+    auto unreadable = [&](const std::string& name) {
+        for (const auto& g : check.grids)
+            if (g.name == name && !g.skipReason.empty()) return true;
+        return false;
+    };
+    if (unreadable(velName)) throw lic::InputError("grid " + detail::q(velName) + " in " + detail::q(path) + " cannot be read");
+    openvdb::io::File file(path);
+    try {
+        file.open(/*delayLoad=*/true);
+    } catch (const std::exception& e) {
+        throw lic::InputError("cannot open " + detail::q(path) + " as a .vdb file: " + e.what());
+    }
+
+    // The whole grid's topology: with delayed loading, value masks without values.
+    openvdb::math::Transform::Ptr xform;
+    openvdb::MaskGrid::Ptr activity;
+    openvdb::GridClass gridClass;
+    {
+        auto whole = openvdb::gridPtrCast<openvdb::Vec3SGrid>(file.readGrid(velName));
+        if (!whole) throw lic::InputError("grid " + detail::q(velName) + " in " + detail::q(path) + " is not a vec3s grid");
+        xform = whole->transform().copy();
+        gridClass = whole->getGridClass();
+        activity = openvdb::MaskGrid::create(std::make_shared<openvdb::MaskTree>(whole->tree(), false, openvdb::TopologyCopy()));
+    }
+    const openvdb::CoordBBox box = activity->evalActiveVoxelBoundingBox();
+    s.extent.activeBox = box;
+    s.extent.activeVoxels = activity->activeVoxelCount();
+    if (s.extent.activeVoxels == 0)
+        throw lic::InputError(detail::q(path) + ": grid " + detail::q(velName) + " has no active voxels; expected a field with data");
+    if (box.dim()[0] <= 1 && box.dim()[1] <= 1 && box.dim()[2] <= 1)
+        throw lic::InputError(detail::q(path) + ": grid " + detail::q(velName)
+                              + " has a single active voxel; expected a field at least 2 voxels long on some axis");
+
+    const int K = r.output.upsample;
+    s.domain = std::make_unique<lic::OutputDomain>(*xform, box, *activity, K);
+    activity.reset();
+    s.layout = std::make_unique<lic::BrickLayout>(*s.domain, lic::detail::brickDim(plan.settings));
+    s.assignment = assignBricks(*s.layout, ranks);
+    s.mine = bricksOf(s.assignment, rank);
+
+    // The part: this rank's bricks (output voxels) in field voxels, grown by the margin.
+    openvdb::CoordBBox region;
+    if (s.mine.empty()) {
+        region = openvdb::CoordBBox(box.min(), box.min()); // nothing to convolve: one voxel
+    } else {
+        openvdb::CoordBBox out;
+        for (std::size_t id : s.mine) out.expand((*s.layout)[id].box);
+        out.intersect(s.domain->indexBBox());
+        const int m = fieldMargin(plan, K, lic::detail::integrationStride(*s.domain, plan.settings));
+        region = openvdb::CoordBBox(
+            openvdb::Coord(lic::detail::floorDiv(out.min()[0], K), lic::detail::floorDiv(out.min()[1], K),
+                           lic::detail::floorDiv(out.min()[2], K)),
+            openvdb::Coord(lic::detail::floorDiv(out.max()[0], K), lic::detail::floorDiv(out.max()[1], K),
+                           lic::detail::floorDiv(out.max()[2], K)))
+                     .expandBy(m);
+    }
+    s.extent.region = region;
+
+    // The velocity, clipped exactly to the part.
+    const openvdb::BBoxd world = worldBoxOf(*xform, region);
+    auto vel = openvdb::gridPtrCast<openvdb::Vec3SGrid>(file.readGrid(velName, worldBoxOf(*xform, region.expandBy(1))));
+    if (!vel) throw lic::InputError("grid " + detail::q(velName) + " in " + detail::q(path) + " could not be read");
+    vel->tree().clip(region);
+    vel->setGridClass(gridClass);
+    setPartOf(*vel, box, region);
+    s.extent.maxSpeed = localMaxSpeed(*vel);
+    s.loaded.velocity = vel;
+    s.loaded.gridName = velName;
+    s.loaded.format = "vdb";
+
+    // The file's float grids over the same world box (each in its own index space).
+    const openvdb::GridPtrVecPtr metas = file.readAllGridMetadata(); // kept: the loop refers into it
+    for (const auto& meta : *metas) {
+        if (meta->valueType() != kFloat) continue;
+        const std::string name = meta->getName();
+        if (unreadable(name)) continue;
+        auto whole = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(name)); // topology (delayed)
+        const openvdb::CoordBBox wholeBox = whole->evalActiveVoxelBoundingBox();
+        const openvdb::math::Transform::Ptr sx = whole->transform().copy();
+        whole.reset();
+        const openvdb::CoordBBox part = indexBoxOf(*sx, world, 2);
+        auto g = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(name, worldBoxOf(*sx, part.expandBy(1))));
+        if (!g) continue;
+        g->tree().clip(part);
+        setPartOf(*g, wholeBox, part);
+        s.loaded.scalars.emplace(name, std::move(g));
+    }
+    file.close();
+}
+
+} // namespace
+
+double spotReach(const Plan& plan)
+{
+    const lic::LicSettings& st = plan.settings;
+    const Recipe& r = plan.recipe;
+    double R = 0.0; // the largest spot (halo) radius, with the profile's soft edge
+    for (double rad : r.input.radii) R = std::max(R, rad * r.input.haloScale);
+    R += 0.5;
+    const double ghost = double(lic::ghostMargin(st));
+    if (st.engine != lic::EngineType::Splat) return ghost + R + 2.0; // a voxel's window meets the spot
+    // Splat: the spot's own line runs n·h + R (+ a sample) each way, and deposits within
+    // √(R² + slab²) of its coarse samples (lic/src/SplatLic.cpp).
+    const double slab = 2.0 * st.step + 0.5;
+    return ghost + R + 1.0 + st.step + std::sqrt(R * R + slab * slab) + 1.25;
+}
+
+int fieldMargin(const Plan& plan, int upsample, int stride)
+{
+    const lic::LicSettings& st = plan.settings;
+    const Recipe& r = plan.recipe;
+    // Output voxels past the brick: the ghost margin (the last texture sample, with its rounding
+    // and footprint), one integration step past the last sample (RK4 every `stride` samples,
+    // RK45 at most 2 voxels or a step), a voxel of rounding.
+    const double integration = std::max({double(stride) * st.step, 2.0, st.step}) + 1.0;
+    double out = double(lic::ghostMargin(st)) + integration;
+    if (plan.spots && st.engine == lic::EngineType::Splat) {
+        // Splat: every spot within spotReach() is traced over its whole support (n·h + R each
+        // way) from its centre, and the flow map carried along it needs derivatives: its whole
+        // line must see the whole field's values, or its window would be cut elsewhere.
+        double R = 0.0;
+        for (double rad : r.input.radii) R = std::max(R, rad * r.input.haloScale);
+        out = spotReach(plan) + double(lic::ghostMargin(st)) + R + 0.5 + st.step + integration + 2.0;
+    } else if (plan.spots) { // spots whose weights a brick's texture reads (ROI pre-mask at their centres)
+        double reach = 0.0;
+        for (double rad : r.input.radii) reach = std::max(reach, rad * r.input.haloScale);
+        out += reach + 1.5;
+    }
+    // Field voxels: that, one for the trilinear footprint and one for a staggered grid's next
+    // face; with scalars, two for a derived scalar's one-sided differences, two for the gradient
+    // of a scalar and one for the scalar probes' trilinear footprint.
+    const bool scalars = r.width || r.color || r.roi || r.input.surface;
+    return int(std::ceil(out / upsample)) + 2 + (scalars ? 5 : 0);
+}
+
+FieldShare readFieldShare(const Plan& plan, int rank, int ranks)
+{
+    const Recipe& r = plan.recipe;
+    FieldShare s;
+    std::string velName;
+    if (ranks > 1) {
+        s.wholeReason = wholeReadReason(r, velName);
+        if (s.wholeReason.empty()) {
+            s.partial = true;
+            readPart(plan, rank, ranks, velName, s);
+            return s;
+        }
+    }
+    s.loaded = loadField(r.field);
+    s.field = std::make_unique<lic::VelocityField>(s.loaded.velocity);
+    s.domain = std::make_unique<lic::OutputDomain>(*s.field, r.output.upsample);
+    s.layout = std::make_unique<lic::BrickLayout>(*s.domain, lic::detail::brickDim(plan.settings));
+    s.assignment = assignBricks(*s.layout, ranks);
+    s.mine = bricksOf(s.assignment, rank);
+    const openvdb::Coord d = s.field->indexBBox().dim();
+    s.voxelsHeld = std::uint64_t(d[0]) * std::uint64_t(d[1]) * std::uint64_t(d[2]);
+    return s;
+}
+
+void makeField(FieldShare& s, double maxSpeed)
+{
+    s.extent.maxSpeed = maxSpeed;
+    s.field = std::make_unique<lic::VelocityField>(s.loaded.velocity, s.extent);
+    openvdb::CoordBBox dense = s.extent.activeBox;
+    dense.intersect(s.extent.region);
+    const openvdb::Coord d = dense.dim();
+    s.voxelsHeld = std::uint64_t(d[0]) * std::uint64_t(d[1]) * std::uint64_t(d[2]);
+}
+
+} // namespace vdbexport::pipeline
