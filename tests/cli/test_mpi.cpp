@@ -146,6 +146,15 @@ void expectSameFiles(const fs::path& a, const fs::path& b, const std::string& wh
     }
 }
 
+/// expectSameFiles for every frame of two loops `dir/a_0001.vdb` … and `dir/b_0001.vdb` ….
+void expectSameFrames(const fs::path& dir, const std::string& a, const std::string& b, int frames, const std::string& what)
+{
+    for (int f = 1; f <= frames; ++f) {
+        const std::string suffix = "_000" + std::to_string(f) + ".vdb";
+        expectSameFiles(dir / (a + suffix), dir / (b + suffix), what + " frame " + std::to_string(f));
+    }
+}
+
 /// The parts of a summary that must not depend on the rank count. The splat engine traces each
 /// spot on every rank its footprint reaches, so its streamlines and samples summed over the ranks
 /// count those spots once per rank (the distribution's extra work): left out for splat.
@@ -268,10 +277,7 @@ TEST_F(MpiBake, AFourFrameLoopIsBitIdenticalInEveryFrame)
     const RunResult r3 = bake(3, "three.vdb", args);
     ASSERT_EQ(r3.code, 0) << r3.describe();
     EXPECT_EQ(counters(json::parse(r3.out)), counters(json::parse(r1.out)));
-    for (int f = 1; f <= 4; ++f) {
-        const std::string suffix = "_000" + std::to_string(f) + ".vdb";
-        expectSameFiles(mOut / ("one" + suffix), mOut / ("three" + suffix), "frame " + std::to_string(f));
-    }
+    expectSameFrames(mOut, "one", "three", 4, "noise loop");
     EXPECT_EQ(manifestCore(mOut / "three.json"), manifestCore(mOut / "one.json"));
 }
 
@@ -295,10 +301,7 @@ TEST_F(MpiBake, SpotsWithHalosWidthsAndColourAreBitIdentical)
     ASSERT_EQ(bake(0, "loop1.vdb", loop).code, 0);
     const RunResult l3 = bake(3, "loop3.vdb", loop);
     ASSERT_EQ(l3.code, 0) << l3.describe();
-    for (int f = 1; f <= 3; ++f) {
-        const std::string suffix = "_000" + std::to_string(f) + ".vdb";
-        expectSameFiles(mOut / ("loop1" + suffix), mOut / ("loop3" + suffix), "spot loop frame " + std::to_string(f));
-    }
+    expectSameFrames(mOut, "loop1", "loop3", 3, "spot loop");
 }
 
 TEST_F(MpiBake, AFieldThatNeedsTheWholeFileIsReadWholeAndStillIdentical)
