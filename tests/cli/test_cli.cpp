@@ -632,8 +632,16 @@ TEST_F(CliTest, InfoHelpVersion)
     EXPECT_NE(hn.err.find("nosuch"), std::string::npos) << hn.describe();
 
     const std::string version = std::string("licvdb ") + LICVDB_VERSION;
+    // No command at all: the synopsis (every command), exit 2; `help` alone: the same synopsis, exit 0
+    // (not the help of the `help` command).
     const RunResult none = run({});
     EXPECT_EQ(none.code, 2) << none.describe();
+    const RunResult help = run({"help"});
+    EXPECT_EQ(help.code, 0) << help.describe();
+    for (const char* command : {"Subcommands:", "field", "bake", "info", "render"}) {
+        EXPECT_NE(none.err.find(command), std::string::npos) << command << "\n" << none.describe();
+        EXPECT_NE(help.out.find(command), std::string::npos) << command << "\n" << help.describe();
+    }
 
     const RunResult v = run({"--version"});
     EXPECT_EQ(v.code, 0) << v.describe();

@@ -324,6 +324,12 @@ int main(int argc, char** argv)
     help->add_option("command", helpTopic, "field, bake, render, info");
     app.add_subcommand("version", "Print the version");
 
+    // The program's own synopsis (App::help() would describe the parsed subcommand instead).
+    const auto synopsis = [&app] { return app.get_formatter()->make_help(&app, app.get_name().empty() ? "licvdb" : app.get_name(), CLI::AppFormatMode::Normal); };
+    if (argc < 2) { // no command at all: say what there is, not only that something is missing
+        std::cerr << synopsis();
+        return 2;
+    }
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) { // also --help and --version, which exit 0
@@ -335,7 +341,7 @@ int main(int argc, char** argv)
     try {
         if (help->parsed()) {
             if (helpTopic.empty()) {
-                std::cout << app.help();
+                std::cout << synopsis();
                 return 0;
             }
             CLI::App* sub = nullptr;
