@@ -76,6 +76,16 @@ protected:
         if (!env.empty()) cmd = "env " + cli_test::shellQuote(env) + " " + cmd;
         return cli_test::runShell(mOut, sDir / "logs", cmd);
     }
+
+    /// The same bake as one process (into `one`) and over 3 ranks (into `three`); both must succeed.
+    void bakeOneAndThree(const std::vector<std::string>& args, RunResult& r1, RunResult& r3,
+                         const std::string& one = "one.vdb", const std::string& three = "three.vdb")
+    {
+        r1 = bake(0, one, args);
+        ASSERT_EQ(r1.code, 0) << r1.describe();
+        r3 = bake(3, three, args);
+        ASSERT_EQ(r3.code, 0) << r3.describe();
+    }
     std::string field(const std::string& name = "jet.vdb") const { return (sDir / name).string(); }
 
     /// Names of the files in this test's directory.
@@ -254,10 +264,8 @@ TEST_F(MpiBake, SplatSpotsOnALongFieldAreIdenticalFromPartsOfIt)
                                                "--input", "spots", "--spacing", "5", "--radii", "1,2",
                                                "--width", "speed", "--color", "vorticity", "--engine", engine,
                                                "--quiet", "--json"};
-        const RunResult r1 = bake(0, engine + "1.vdb", args);
-        ASSERT_EQ(r1.code, 0) << r1.describe();
-        const RunResult r3 = bake(3, engine + "3.vdb", args);
-        ASSERT_EQ(r3.code, 0) << r3.describe();
+        RunResult r1, r3;
+        ASSERT_NO_FATAL_FAILURE(bakeOneAndThree(args, r1, r3, engine + "1.vdb", engine + "3.vdb"));
         expectSameFiles(mOut / (engine + "1.vdb"), mOut / (engine + "3.vdb"), engine + " spots, long field");
         EXPECT_EQ(counters(json::parse(r3.out)), counters(json::parse(r1.out))) << engine;
         const json s = json::parse(r3.out);
@@ -272,10 +280,8 @@ TEST_F(MpiBake, AFourFrameLoopIsBitIdenticalInEveryFrame)
 {
     auto args = withField(kNoise, field());
     args.insert(args.end(), {"--frames", "4"});
-    const RunResult r1 = bake(0, "one.vdb", args);
-    ASSERT_EQ(r1.code, 0) << r1.describe();
-    const RunResult r3 = bake(3, "three.vdb", args);
-    ASSERT_EQ(r3.code, 0) << r3.describe();
+    RunResult r1, r3;
+    ASSERT_NO_FATAL_FAILURE(bakeOneAndThree(args, r1, r3));
     EXPECT_EQ(counters(json::parse(r3.out)), counters(json::parse(r1.out)));
     expectSameFrames(mOut, "one", "three", 4, "noise loop");
     EXPECT_EQ(manifestCore(mOut / "three.json"), manifestCore(mOut / "one.json"));
@@ -287,10 +293,8 @@ TEST_F(MpiBake, SpotsWithHalosWidthsAndColourAreBitIdentical)
                                            "--spacing", "6", "--radii", "1,1.5,2", "--width", "speed", "--color",
                                            "temperature", "--colormap", "heated-object", "--write-series",
                                            "--write-tangent", "--quiet", "--json"};
-    const RunResult r1 = bake(0, "one.vdb", args);
-    ASSERT_EQ(r1.code, 0) << r1.describe();
-    const RunResult r3 = bake(3, "three.vdb", args);
-    ASSERT_EQ(r3.code, 0) << r3.describe();
+    RunResult r1, r3;
+    ASSERT_NO_FATAL_FAILURE(bakeOneAndThree(args, r1, r3));
     expectSameFiles(mOut / "one.vdb", mOut / "three.vdb", "spots");
     EXPECT_EQ(counters(json::parse(r3.out)), counters(json::parse(r1.out)));
     EXPECT_GT(json::parse(r1.out)["spots"]["count"].get<int>(), 100);
@@ -308,10 +312,8 @@ TEST_F(MpiBake, AFieldThatNeedsTheWholeFileIsReadWholeAndStillIdentical)
 {
     auto args = withField(kNoise, field());
     args.insert(args.end(), {"--mask", "zero"});
-    const RunResult r1 = bake(0, "one.vdb", args);
-    ASSERT_EQ(r1.code, 0) << r1.describe();
-    const RunResult r3 = bake(3, "three.vdb", args);
-    ASSERT_EQ(r3.code, 0) << r3.describe();
+    RunResult r1, r3;
+    ASSERT_NO_FATAL_FAILURE(bakeOneAndThree(args, r1, r3));
     const json s = json::parse(r3.out);
     EXPECT_FALSE(s["mpi"]["partial_read"].get<bool>());
     EXPECT_NE(s["mpi"]["whole_read_reason"].get<std::string>().find("mask"), std::string::npos) << r3.out;
