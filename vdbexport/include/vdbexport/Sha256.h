@@ -1,9 +1,11 @@
-// SHA-256 (FIPS 180-4), for the checksums a bake's manifest carries of the files it describes.
+// SHA-256 (OpenSSL's EVP digest), for the checksums a bake's manifest carries of the files it describes.
 #pragma once
 
 #include <cstddef>
-#include <cstdint>
+#include <memory>
 #include <string>
+
+struct evp_md_ctx_st;
 
 namespace vdbexport {
 
@@ -12,16 +14,15 @@ class Sha256
 {
 public:
     Sha256();
+    ~Sha256();
+    Sha256(const Sha256&) = delete;
+    Sha256& operator=(const Sha256&) = delete;
     void update(const void* data, std::size_t bytes);
     /// The digest as 64 lower-case hex digits; ends the computation.
     std::string hex();
 
 private:
-    void block(const unsigned char* p);
-    uint32_t mH[8];
-    unsigned char mBuf[64];
-    std::size_t mBufLen = 0;
-    uint64_t mTotal = 0;
+    evp_md_ctx_st* mCtx; // EVP_MD_CTX
 };
 
 /// SHA-256 of the whole file open as `fd` (read with pread from offset 0), as hex.
