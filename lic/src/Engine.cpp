@@ -53,9 +53,6 @@ void LicSettings::validate() const
     if (length / step > 1e6) fail("length/step", length / step, "at most 1e6 samples per direction");
     if (!(tolerance > 0)) fail("tolerance", tolerance, "> 0");
     if (kernel == KernelType::Exp && !(decay > 0 && decay < 1)) fail("decay", decay, "in (0, 1)");
-    if (ripple && kernel != KernelType::Box) {
-        throw InputError("cyclic animation (frames > 1) needs the box kernel; the exp kernel is not animated yet");
-    }
     if (minHits < 1 || minHits > 64) fail("min_hits", minHits, "1..64");
     if (threads < 0) fail("threads", threads, ">= 0 (0 = all cores)");
     if (coveredRun < 1) fail("covered run", coveredRun, ">= 1");
@@ -107,6 +104,13 @@ void windowSums(KernelType kernel, double decay, int n, std::size_t N, int W, co
         const double K = double(std::min(nn, N - 1 - i)); // window is samples i … i+K
         norm[i] = (1.0 - std::pow(decay, K + 1.0)) / (1.0 - decay);
     }
+}
+
+int ripplePeriod(const LicSettings& settings)
+{
+    // One ripple per window, either kernel: the 2n+1 samples of a box window, the n+1 of an exp one.
+    const int n = settings.halfSamples();
+    return settings.kernel == KernelType::Box ? 2 * n + 1 : n + 1;
 }
 
 int integrationStride(const OutputDomain& domain, const LicSettings& settings)

@@ -34,6 +34,21 @@ struct Window
     }
 };
 
+/// The ripple normalisation Σ w_i e^{iθi} / Σ w_i over window samples i0 … i1 (as Re, Im). Box
+/// over a whole window: 0 up to rounding, returned as exactly 0 (the period is the window).
+std::array<double, 2> rippleNorm(const Window& win, double theta, int i0, int i1)
+{
+    if (!win.exp && i0 == win.lo && i1 == win.hi) return {0.0, 0.0};
+    double nr = 0, ni = 0, total = 0;
+    for (int i = i0; i <= i1; ++i) {
+        const double w = win.weight(i);
+        nr += w * std::cos(theta * double(i));
+        ni += w * std::sin(theta * double(i));
+        total += w;
+    }
+    return {nr / total, ni / total};
+}
+
 Window windowOf(const LicSettings& s)
 {
     const int n = s.halfSamples();
@@ -47,7 +62,7 @@ SplatTables::SplatTables(const std::vector<double>& radii, const LicSettings& se
     : mRadii(radii)
     , mH(settings.step)
     , mDecay(settings.decay)
-    , mTheta(detail::rippleStep(settings.halfSamples()))
+    , mTheta(detail::rippleStep(settings))
     , mExp(settings.kernel == KernelType::Exp)
     , mRipple(settings.ripple)
     , mC(int(radii.size()))
@@ -65,7 +80,7 @@ SplatTables::SplatTables(const std::vector<double>& radii, const LicSettings& se
     mND = int(std::ceil(mReach / mDD)) + 2;
     mTable.assign(std::size_t(mNTau) * std::size_t(mND) * std::size_t(mParts), 0.0f);
     const double total = win.total();
-    const double theta = detail::rippleStep(settings.halfSamples());
+    const double theta = detail::rippleStep(settings);
     tbb::parallel_for(0, mNTau, [&](int t) {
         const double tau = mTauMin + double(t) * mDTau;
         // Only the window samples within reach of the spot contribute.
@@ -83,8 +98,8 @@ SplatTables::SplatTables(const std::vector<double>& radii, const LicSettings& se
                     if (f == 0.0) continue;
                     a += win.weight(i) * f;
                     if (settings.ripple) {
-                        zr += f * std::cos(theta * double(i));
-                        zi += f * std::sin(theta * double(i));
+                        zr += win.weight(i) * f * std::cos(theta * double(i));
+                        zi += win.weight(i) * f * std::sin(theta * double(i));
                     }
                 }
                 out[c] = float(a / total);
@@ -125,8 +140,8 @@ void SplatTables::addDirect(double tau, double d, float a, int i0, int i1, doubl
             if (f == 0.0) continue;
             out[c] += float(w * f);
             if (mRipple) {
-                out[mC + c] += float(double(a) / weight * f * std::cos(mTheta * double(i)));
-                out[2 * mC + c] += float(double(a) / weight * f * std::sin(mTheta * double(i)));
+                out[mC + c] += float(w * f * std::cos(mTheta * double(i)));
+                out[2 * mC + c] += float(w * f * std::sin(mTheta * double(i)));
             }
         }
     }
@@ -232,7 +247,8 @@ LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain,
     const double h = settings.step;
     const Window win = windowOf(settings);
     const double winTotal = win.total();
-    const double theta = detail::rippleStep(settings.halfSamples());
+    const double theta = detail::rippleStep(settings);
+    const std::array<double, 2> wholeNorm = rippleNorm(win, theta, win.lo, win.hi); // box: (0, 0)
     constexpr std::size_t V = OutputDomain::kBlockVoxels;
 
     progress.begin("splat", domain.activeVoxelCount());
@@ -457,17 +473,9 @@ LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain,
                     // The window's own ripple normalisation (Σ e^{iθi} / N over the samples inside),
                     // from the nearest spot line: 0 for a whole window.
                     sc.nearest[li] = float(d);
-                    double nr = 0, ni = 0;
-                    if (i0 != win.lo || i1 != win.hi) {
-                        for (int i = i0; i <= i1; ++i) {
-                            nr += std::cos(theta * double(i));
-                            ni += std::sin(theta * double(i));
-                        }
-                        nr /= double(i1 - i0 + 1);
-                        ni /= double(i1 - i0 + 1);
-                    }
-                    acc[3 * C] = float(nr);
-                    acc[3 * C + 1] = float(ni);
+                    const std::array<double, 2> nz = (i0 != win.lo || i1 != win.hi) ? rippleNorm(win, theta, i0, i1) : wholeNorm;
+                    acc[3 * C] = float(nz[0]);
+                    acc[3 * C + 1] = float(nz[1]);
                 }
                 ++deposits;
             }

@@ -830,11 +830,6 @@ const std::vector<BadCase>& badCases()
         {"--frames 0",
          [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--frames", "0"}); },
          {"frames"}},
-        {"--frames with the exp kernel (not animated yet)",
-         [](const fs::path& w, const fs::path& abc) {
-             return bakeArgs(abc, w / "out.vdb", {"--frames", "3", "--kernel", "exp"});
-         },
-         {"box kernel"}},
     };
     return cases;
 }

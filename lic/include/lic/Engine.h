@@ -46,7 +46,7 @@ struct LicSettings
     Integrator integrator = Integrator::RK4;
     KernelType kernel = KernelType::Box;
     double decay = 0.9;      ///< exp kernel: weight ratio c of consecutive samples, in (0, 1)
-    /// Also produce the ripple sums a cyclic animation is composed from (box kernel only; see
+    /// Also produce the ripple sums a cyclic animation is composed from (either kernel; see
     /// Animation.h). The result then has 3·C + 2 channels.
     bool ripple = false;
     double length = 20.0;    ///< kernel half-length, one direction (> 0)
@@ -134,9 +134,11 @@ LicResult convolve(const VelocityField& field, const OutputDomain& domain, const
                    const LicSettings& settings, Progress& progress = nullProgress());
 
 namespace detail {
-/// Ripple phase step per sample (cyclic animation): one period over the 2n+1 samples of a box
-/// window.
-inline double rippleStep(int n) { return 2.0 * 3.14159265358979323846 / double(2 * n + 1); }
+/// Ripple period in samples (cyclic animation): one ripple per kernel window, the 2n+1 samples of
+/// a box window or the n+1 of an exp one (downstream only). See Animation.h and docs/technique.md §8.
+int ripplePeriod(const LicSettings& settings);
+/// Ripple phase step per sample: one period over ripplePeriod() samples.
+inline double rippleStep(const LicSettings& settings) { return 2.0 * 3.14159265358979323846 / double(ripplePeriod(settings)); }
 
 /// Kernel-weighted window sums along one streamline of N samples with W values each (row-major
 /// `vals`): `win` (N × W) gets each sample's weighted sum, `norm` (N) its total weight.

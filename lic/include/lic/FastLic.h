@@ -58,7 +58,7 @@ void fastLicBrick(const VelocityField& field, const OutputDomain& domain, const 
     constexpr int P = 4 * C;
     constexpr int W = Ripple ? 3 * P + 2 : P;
     const int n = settings.halfSamples();
-    const double theta = detail::rippleStep(n);
+    const double theta = detail::rippleStep(settings);
     TraceSettings ts = detail::traceSettings(field, domain, settings);
     const double maxLen = settings.maxStreamline > 0 ? settings.maxStreamline
                                                      : std::max(8.0 * settings.length, 200.0);

@@ -30,7 +30,7 @@ void naiveLicBrick(const VelocityField& field, const OutputDomain& domain, const
     constexpr int C = Texture::kChannels;
     constexpr int K = Ripple ? 3 * C + 2 : C; // output channels, as in fastLicBrick()
     constexpr std::size_t V = OutputDomain::kBlockVoxels;
-    const double theta = detail::rippleStep(settings.halfSamples());
+    const double theta = detail::rippleStep(settings);
     const TraceSettings ts = detail::traceSettings(field, domain, settings);
     const bool oriented = settings.kernel == KernelType::Exp;
     out.assign(brick.blocks.size() * std::size_t(K) * V, 0.0f);
@@ -74,11 +74,11 @@ void naiveLicBrick(const VelocityField& field, const OutputDomain& domain, const
                     const double k = q < forward ? double(q + 1) : -double(q - forward + 1);
                     const double cs = std::cos(theta * k), sn = std::sin(theta * k);
                     for (int c = 0; c < C; ++c) {
-                        zr[c] += v[c] * cs;
-                        zi[c] += v[c] * sn;
+                        zr[c] += weight * v[c] * cs;
+                        zi[c] += weight * v[c] * sn;
                     }
-                    nr += cs;
-                    ni += sn;
+                    nr += weight * cs;
+                    ni += weight * sn;
                 }
             }
             for (int c = 0; c < C; ++c) dst[std::size_t(c) * V + off] = float(sum[c] / total);
