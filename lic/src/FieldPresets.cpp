@@ -138,11 +138,12 @@ Vec3d saddleVelocity(const Vec3d& p) { return {p.x(), p.y(), -2.0 * p.z()}; }
 ///   s = (r + r2 - t) s / (t + 1e-11) / (1 + z)
 ///   v = (s (y - yc) + 0.1 (x - xc), -s (x - xc) + 0.1 (y - yc), s z0)
 /// (The magnitude jumps where |r - t| = r2, as in the original.)
-Vec3d tornadoVelocity(const Vec3d& p)
+Vec3d tornadoVelocityAt(const Vec3d& p, double time)
 {
     const double x = p.x(), y = p.y(), z = p.z();
-    const double xc = 0.5 + 0.1 * std::sin(10.0 * z);
-    const double yc = 0.5 + 0.1 * std::cos(3.0 * z);
+    // Crawfis's time term (0.04 and 0.03 per step) at 25 steps per time unit.
+    const double xc = 0.5 + 0.1 * std::sin(1.0 * time + 10.0 * z);
+    const double yc = 0.5 + 0.1 * std::cos(0.75 * time + 3.0 * z);
     const double r = 0.1 + 0.4 * z * z + 0.1 * z * std::sin(8.0 * z);
     const double r2 = 0.2 + 0.1 * z;
     double temp = std::hypot(x - xc, y - yc);
@@ -154,6 +155,8 @@ Vec3d tornadoVelocity(const Vec3d& p)
     scale /= (1.0 + z);
     return {scale * (y - yc) + 0.1 * (x - xc), -scale * (x - xc) + 0.1 * (y - yc), scale * z0};
 }
+
+Vec3d tornadoVelocity(const Vec3d& p) { return tornadoVelocityAt(p, 0.0); }
 
 /// vortex-ring: one vortex ring of radius R = 0.5 in the plane z = 0, Lamb-Oseen core of
 /// radius a = 0.15, circulation Γ = 1. With ρ = hypot(x, y), d = (d_ρ, d_z) = (ρ - R, z),
@@ -309,14 +312,20 @@ openvdb::Coord presetDefaultResolution(const std::string& name)
     return detail::findPreset(name).defaultResolution;
 }
 
-PresetField makePresetField(const std::string& name, const openvdb::Coord& resolution)
+bool presetIsUnsteady(const std::string& name) { return detail::findPreset(name).name == std::string("tornado"); }
+
+PresetField makePresetField(const std::string& name, const openvdb::Coord& resolution, double time)
 {
     const detail::PresetInfo& info = detail::findPreset(name);
     detail::validateResolution(resolution);
     openvdb::initialize();
 
     const auto xform = detail::presetTransform(info, resolution);
-    const auto velocityFn = detail::velocityFunction(name);
+    const auto steadyFn = detail::velocityFunction(name);
+    const bool unsteady = presetIsUnsteady(name) && time != 0.0;
+    auto velocityFn = [steadyFn, unsteady, time](const openvdb::Vec3d& p) {
+        return unsteady ? detail::tornadoVelocityAt(p, time) : steadyFn(p);
+    };
 
     PresetField field;
     field.velocity = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
@@ -326,6 +335,7 @@ PresetField makePresetField(const std::string& name, const openvdb::Coord& resol
     field.velocity->setVectorType(openvdb::VEC_CONTRAVARIANT_RELATIVE);
     field.velocity->setIsInWorldSpace(true);
     field.velocity->insertMeta("licvdb_preset", openvdb::StringMetadata(name));
+    if (time != 0.0) field.velocity->insertMeta("licvdb_time", openvdb::DoubleMetadata(time));
     detail::activateBox(*field.velocity, resolution);
     detail::fillFromWorld(*field.velocity, [velocityFn](const openvdb::Vec3d& p) {
         return openvdb::Vec3s(velocityFn(p));

@@ -20,8 +20,12 @@ NoiseTexture::NoiseTexture(std::uint64_t seed, const openvdb::CoordBBox& box, No
     assign(seed, box, filter, true);
 }
 
-void NoiseTexture::assign(std::uint64_t seed, const openvdb::CoordBBox& box, NoiseFilter filter, bool parallel)
+void NoiseTexture::assign(std::uint64_t seed, const openvdb::CoordBBox& box, NoiseFilter filter, bool parallel,
+                          const RawNoise* rawNoise)
 {
+    auto white = [&](int i, int j, int k) {
+        return rawNoise ? (*rawNoise)(openvdb::Coord(i, j, k)) : whiteNoise(seed, i, j, k);
+    };
     mSeed = seed;
     mFilter = filter;
     mBox = box;
@@ -42,7 +46,7 @@ void NoiseTexture::assign(std::uint64_t seed, const openvdb::CoordBBox& box, Noi
         forEach(nx, [&](std::size_t i) {
             for (std::size_t j = 0; j < ny; ++j)
                 for (std::size_t k = 0; k < nz; ++k)
-                    mData[index(i, j, k)] = whiteNoise(seed, mLo[0] + int(i), mLo[1] + int(j), mLo[2] + int(k));
+                    mData[index(i, j, k)] = white(mLo[0] + int(i), mLo[1] + int(j), mLo[2] + int(k));
         });
         return;
     }
@@ -57,7 +61,7 @@ void NoiseTexture::assign(std::uint64_t seed, const openvdb::CoordBBox& box, Noi
         for (std::size_t j = 0; j < ry; ++j)
             for (std::size_t k = 0; k < rz; ++k)
                 raw[rindex(i, j, k)] =
-                    whiteNoise(seed, mLo[0] - 1 + int(i), mLo[1] - 1 + int(j), mLo[2] - 1 + int(k));
+                    white(mLo[0] - 1 + int(i), mLo[1] - 1 + int(j), mLo[2] - 1 + int(k));
     });
     // z pass (raw → pass), y pass (pass → raw), x pass (raw → mData); edges use what exists.
     forEach(rx, [&](std::size_t i) {

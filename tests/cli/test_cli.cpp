@@ -827,6 +827,22 @@ const std::vector<BadCase>& badCases()
         {"unknown flag",
          [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--nosuch"}); },
          {"--nosuch"}},
+        {"--field-frames with a field that has no frame number",
+         [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--field-frames", "1,3"}); },
+         {"--field-frames", "#"}},
+        {"a field sequence with a missing frame",
+         [](const fs::path& w, const fs::path& abc) {
+             fs::copy_file(abc, w / "seq_0001.vdb", fs::copy_options::overwrite_existing);
+             fs::copy_file(abc, w / "seq_0003.vdb", fs::copy_options::overwrite_existing);
+             return bakeArgs(w / "seq_####.vdb", w / "out.vdb");
+         },
+         {"frame 2 is missing"}},
+        {"a field sequence with a cyclic loop",
+         [](const fs::path& w, const fs::path& abc) {
+             fs::copy_file(abc, w / "lp_0001.vdb", fs::copy_options::overwrite_existing);
+             return bakeArgs(w / "lp_####.vdb", w / "out.vdb", {"--frames", "4"});
+         },
+         {"animation.frames", "not a loop"}},
         {"--frames 0",
          [](const fs::path& w, const fs::path& abc) { return bakeArgs(abc, w / "out.vdb", {"--frames", "0"}); },
          {"frames"}},

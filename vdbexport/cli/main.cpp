@@ -5,6 +5,7 @@
 // puts a machine-readable summary on stdout.
 
 #include "vdbexport/Bake.h"
+#include "vdbexport/FieldSequence.h"
 #include "vdbexport/Distributed.h"
 #include "vdbexport/Info.h"
 #include "vdbexport/Numbers.h"
@@ -24,6 +25,7 @@
 #include <csignal>
 #include <cstdlib>
 #include <filesystem>
+#include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <new>
@@ -174,11 +176,16 @@ int main(int argc, char** argv)
     CLI::App* field = app.add_subcommand("field", "Write an analytic example vector field");
     field->add_option("preset", preset, "Preset name")->required();
     field->add_option("--res", res, "Resolution X,Y,Z in voxels (default per preset)");
-    field->add_option("-o,--out", fieldOut, "Output .vdb")->required();
+    field->add_option("-o,--out", fieldOut, "Output .vdb (with --frames: a pattern with #### for the frame number)")->required();
+    std::string fieldFrames;
+    double fieldFps = 24;
+    field->add_option("--frames", fieldFrames, "FIRST,LAST: write a sequence, frame n at time n/fps (tornado moves; the others are steady)");
+    field->add_option("--fps", fieldFps, "With --frames: frames per time unit of the field [24]");
     addCommon(field, fieldCommon);
     field->footer("Presets:\n" + presetList() +
                   "\nExamples:\n  licvdb field abc --res 64,64,64 --out abc.vdb\n"
-                  "  licvdb field tabbed-jet --out jet.vdb      # 101x101x148, with `temperature`\n");
+                  "  licvdb field tabbed-jet --out jet.vdb      # 101x101x148, with `temperature`\n"
+                  "  licvdb field tornado --frames 1,48 --out tornado_####.vdb   # an unsteady sequence\n");
 
     // bake -------------------------------------------------------------------------------------
     Common bakeCommon;
@@ -221,6 +228,10 @@ int main(int argc, char** argv)
     auto* oMask = bake->add_option("--mask", cli.field.mask, "none|zero: zero deactivates zero-velocity voxels [none]");
     auto* oNanPolicy = bake->add_option("--nan-policy", cli.field.nanPolicy, "refuse|zero: NaN/Inf in the field is an error, or set to 0 [refuse]");
     auto* oFrames = bake->add_option("--frames", cli.animation.frames, "Frames of a cyclic animation [1]");
+    std::string fieldFramesRange;
+    auto* oFieldFrames = bake->add_option("--field-frames", fieldFramesRange,
+                                          "FIRST,LAST: bake the unsteady sequence --field pattern_####.vdb (default: every frame on disk)");
+    auto* oFps = bake->add_option("--fps", cli.field.fps, "Unsteady sequence: frames per second (velocity is world units per second) [24]");
     bool writeInput = false, writeTangent = false, halfFloat = false;
     auto* oWriteInput = bake->add_flag("--write-input", writeInput, "Also write the input texture as grid `input`");
     auto* oWriteTangent = bake->add_flag("--write-tangent", writeTangent, "Also write the unit flow direction as vec3s grid `tangent`");
@@ -253,6 +264,8 @@ int main(int argc, char** argv)
         "  licvdb bake --recipe examples/recipes/tabbed-jet-halos.json --field jet.vdb --out jet_halos.vdb\n"
         "  licvdb bake --field jet.vdb --out jet_vort.vdb --color vorticity --colormap heated-object\n"
         "  licvdb bake --field cache_data/fluid_data_0010.vdb --out smoke_lic.vdb   # Blender smoke cache\n"
+        "  licvdb bake --field 'cache_data/fluid_data_####.vdb' --field-frames 1,120 --out smoke.vdb  # unsteady: smoke_0001.vdb …\n"
+        "  licvdb bake --field jet.vdb --out oriented.vdb --kernel exp --frames 24   # a loop of tapered streamlets\n"
         "  licvdb bake --field flow.npy --voxel-size 0.1 --origin -1,-1,0 --out flow_lic.vdb\n"
         "  licvdb bake --field flow.raw --shape 64,64,32 --dtype float64 --out flow_lic.vdb\n"
         "Field formats and preparation: see docs/inputs.md.\n");
@@ -361,13 +374,32 @@ int main(int argc, char** argv)
         if (field->parsed()) {
             currentCommand = "licvdb field";
             const openvdb::Coord r = res.empty() ? lic::presetDefaultResolution(preset) : parseRes(res);
-            const lic::PresetField f = lic::makePresetField(preset, r);
-            openvdb::GridPtrVec grids{f.velocity};
-            for (const auto& s : f.scalars) grids.push_back(s);
-            vdbexport::writeVdbAtomic(fieldOut, grids);
+            std::vector<int> numbers{0};
+            if (!fieldFrames.empty()) {
+                const auto v = vdbexport::parseNumberList("--frames", fieldFrames, "FIRST,LAST", 2);
+                if (v[0] != std::floor(v[0]) || v[1] != std::floor(v[1]) || v[0] < 0 || v[1] < v[0] || v[1] - v[0] >= 100000)
+                    throw lic::InputError("--frames " + fieldFrames + ": expected FIRST,LAST whole numbers, 0 <= FIRST <= LAST");
+                if (!(fieldFps > 0) || !std::isfinite(fieldFps)) throw lic::InputError("--fps must be > 0");
+                if (!vdbexport::isFramePattern(fieldOut))
+                    throw lic::InputError("--out \"" + fieldOut + "\": with --frames, put #### where the frame number goes");
+                numbers.clear();
+                for (int n = int(v[0]); n <= int(v[1]); ++n) numbers.push_back(n);
+            }
+            vdbexport::OutputSet outputs; // all frames appear together, or none
+            openvdb::GridPtrVec grids;
+            std::vector<std::string> written;
+            for (int n : numbers) {
+                const double time = fieldFrames.empty() ? 0.0 : double(n) / fieldFps;
+                const lic::PresetField f = lic::makePresetField(preset, r, time);
+                grids = {f.velocity};
+                for (const auto& s : f.scalars) grids.push_back(s);
+                written.push_back(fieldFrames.empty() ? fieldOut : vdbexport::expandFramePattern(fieldOut, n));
+                outputs.addVdb(written.back(), grids);
+            }
+            outputs.commit();
             if (fieldCommon.json) {
                 nlohmann::json j{{"output", fieldOut}, {"preset", preset}, {"resolution", {r[0], r[1], r[2]}},
-                                 {"grids", nlohmann::json::array()}};
+                                 {"grids", nlohmann::json::array()}, {"files", written}};
                 for (const auto& g : grids) j["grids"].push_back(g->getName());
                 std::cout << j.dump(2) << "\n";
             } else if (!fieldCommon.quiet) {
@@ -451,6 +483,17 @@ int main(int argc, char** argv)
             if (oSeed->count()) r.input.seed = cli.input.seed;
             if (oContrast->count()) r.output.contrast = cli.output.contrast;
             if (oFrames->count()) r.animation.frames = cli.animation.frames;
+            if (oFieldFrames->count()) {
+                const auto v = vdbexport::parseNumberList("--field-frames", fieldFramesRange, "FIRST,LAST", 2);
+                if (v[0] != std::floor(v[0]) || v[1] != std::floor(v[1]) || std::abs(v[0]) > 1e9 || std::abs(v[1]) > 1e9)
+                    throw lic::InputError("--field-frames " + fieldFramesRange + ": expected FIRST,LAST whole frame numbers");
+                r.field.frames = std::array<int, 2>{int(v[0]), int(v[1])};
+                if (!vdbexport::isFramePattern(r.field.path)) {
+                    throw lic::InputError("--field \"" + r.field.path + "\" has no frame number: with --field-frames, put a run "
+                                          "of # (or %04d) where it goes, e.g. cache/data/fluid_data_####.vdb");
+                }
+            }
+            if (oFps->count()) r.field.fps = cli.field.fps;
             if (!colorScalar.empty()) {
                 if (!r.color) r.color = vdbexport::ColorSpec{};
                 r.color->scalar = colorScalar;

@@ -6,9 +6,11 @@
 #include "bake/Input.h"
 #include "bake/Plan.h"
 #include "bake/Scalars.h"
+#include "bake/Sequence.h"
 #include "bake/Write.h"
 
 #include "vdbexport/FieldInput.h"
+#include "vdbexport/FieldSequence.h"
 
 #include "lic/Colormap.h"
 #include "lic/Engine.h"
@@ -56,8 +58,16 @@ void checkNotOverwritten(const Recipe& recipe, const std::string& path, const st
     const fs::path input = fs::weakly_canonical(path, ec);
     if (ec) return; // cannot be resolved: reading it will report the problem
     std::vector<std::string> outputs{manifestPath(recipe.output.path)};
-    for (int f = 1; f <= recipe.animation.frames; ++f)
-        outputs.push_back(framePath(recipe.output.path, f, recipe.animation.frames));
+    if (isSequenceBake(recipe)) {
+        try {
+            for (int f : resolveFieldFrames(recipe.field).numbers) outputs.push_back(sequenceFramePath(recipe.output.path, f));
+        } catch (const lic::InputError&) {
+            // the bake itself reports a sequence it cannot resolve
+        }
+    } else {
+        for (int f = 1; f <= recipe.animation.frames; ++f)
+            outputs.push_back(framePath(recipe.output.path, f, recipe.animation.frames));
+    }
     for (const auto& out : outputs) {
         std::error_code e1, e2;
         const bool same = fs::equivalent(path, out, e1) || fs::weakly_canonical(out, e2) == input;
@@ -69,16 +79,6 @@ void checkNotOverwritten(const Recipe& recipe, const std::string& path, const st
 }
 
 namespace {
-
-lic::Colormap loadColormap(const std::string& spec)
-{
-    if (fs::path(spec).extension() != ".csv") return lic::Colormap::named(spec);
-    std::ifstream in(spec);
-    if (!in) throw lic::InputError("colormap LUT file \"" + spec + "\" cannot be read");
-    std::stringstream text;
-    text << in.rdbuf();
-    return lic::Colormap::fromCsv(text.str(), spec);
-}
 
 /// Peak resident memory of this process so far, MiB (Linux: ru_maxrss is in KiB).
 double peakRssMiB()
@@ -134,11 +134,24 @@ openvdb::BBoxd bricksBox(const lic::BrickLayout& layout, const std::vector<std::
 
 } // namespace
 
+namespace pipeline {
+lic::Colormap loadColormap(const std::string& spec)
+{
+    if (fs::path(spec).extension() != ".csv") return lic::Colormap::named(spec);
+    std::ifstream in(spec);
+    if (!in) throw lic::InputError("colormap LUT file \"" + spec + "\" cannot be read");
+    std::stringstream text;
+    text << in.rdbuf();
+    return lic::Colormap::fromCsv(text.str(), spec);
+}
+} // namespace pipeline
+
 // The pipeline of DESIGN.md, top to bottom; each stage lives in src/bake/. In a distributed bake
 // (mpirun) every rank runs it on its share of the bricks and rank 0 writes (bake/Distribute.h);
 // in one process every Job call below is a no-op.
 nlohmann::json bake(const Recipe& request, lic::Progress& progress)
 {
+    if (isSequenceBake(request)) return pipeline::bakeSequence(request, progress);
     // The engine "auto" is resolved here, so the recipe a bake records names the engine it used.
     Recipe recipe = request;
     if (recipe.lic.engine == "auto") recipe.lic.engine = recipe.input.type == "spots" ? "splat" : "fast";
@@ -194,7 +207,7 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
                                : pipeline::autoRange(pipeline::ScalarField(scalars.get(recipe.width->scalar)), domain, recipe.threads, blocks, reduce);
         }
         if (recipe.color) {
-            cmap = loadColormap(recipe.color->colormap);
+            cmap = pipeline::loadColormap(recipe.color->colormap);
             ranges.color = recipe.color->range
                                ? *recipe.color->range
                                : pipeline::autoRange(pipeline::ScalarField(scalars.get(recipe.color->scalar)), domain, recipe.threads, blocks, reduce);
@@ -241,49 +254,13 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     // 7. Metadata, files, manifest.
     const auto t3 = Clock::now();
     const nlohmann::json resolved = recipe.toJson();
-    openvdb::MetaMap densityMeta; // on `density` of every frame
-    densityMeta.insertMeta("licvdb_version", openvdb::StringMetadata(LICVDB_VERSION));
-    densityMeta.insertMeta("licvdb_recipe", openvdb::StringMetadata(resolved.dump()));
-    densityMeta.insertMeta("licvdb_field_grid", openvdb::StringMetadata(loaded.gridName));
-    densityMeta.insertMeta("lic_engine", openvdb::StringMetadata(recipe.lic.engine));
-    densityMeta.insertMeta("lic_kernel", openvdb::StringMetadata(recipe.lic.kernel));
-    densityMeta.insertMeta("lic_length", openvdb::FloatMetadata(float(recipe.lic.length)));
-    densityMeta.insertMeta("lic_step", openvdb::FloatMetadata(float(recipe.lic.step)));
-    densityMeta.insertMeta("lic_brick", openvdb::Int32Metadata(layout.dim()));
-    if (plan.settings.kernel == lic::KernelType::Exp) {
-        densityMeta.insertMeta("lic_decay", openvdb::FloatMetadata(float(recipe.lic.decay)));
-        densityMeta.insertMeta("lic_orientation", openvdb::StringMetadata("bright head downstream"));
-    }
+    pipeline::Description desc =
+        pipeline::describeBake(plan, resolved, loaded.gridName, layout.dim(), spotCount, ranges, cmap ? &*cmap : nullptr);
+    openvdb::MetaMap& densityMeta = desc.densityMeta; // on `density` of every frame
     densityMeta.insertMeta("lic_frames", openvdb::Int32Metadata(plan.frames));
     densityMeta.insertMeta("lic_cyclic", openvdb::BoolMetadata(plan.frames > 1));
-    densityMeta.insertMeta("lic_input", openvdb::StringMetadata(recipe.input.type));
-    nlohmann::json spotsJson = nullptr;
-    if (plan.spots) {
-        const std::string placement = recipe.input.surface ? "surface" : recipe.input.distribution;
-        densityMeta.insertMeta("lic_spot_count", openvdb::Int64Metadata(openvdb::Int64(spotCount)));
-        densityMeta.insertMeta("lic_spot_placement", openvdb::StringMetadata(placement));
-        densityMeta.insertMeta("lic_halo_scale", openvdb::FloatMetadata(float(recipe.input.haloScale)));
-        spotsJson = {{"count", spotCount}, {"placement", placement},
-                     {"spacing", recipe.input.spacing}, {"radii", recipe.input.radii},
-                     {"halo_scale", recipe.input.haloScale}, {"line_peaks", plan.linePeak}, {"halo_peaks", plan.haloPeak}};
-        if (recipe.width) {
-            densityMeta.insertMeta("lic_width_scalar", openvdb::StringMetadata(recipe.width->scalar));
-            densityMeta.insertMeta("lic_width_range",
-                                   openvdb::Vec2DMetadata(openvdb::Vec2d(ranges.width[0], ranges.width[1])));
-            spotsJson["width"] = {{"scalar", recipe.width->scalar}, {"range", ranges.width},
-                                  {"invert", recipe.width->invert}};
-        }
-    }
-    nlohmann::json colorJson = nullptr;
-    if (recipe.color) {
-        densityMeta.insertMeta("lic_color_scalar", openvdb::StringMetadata(recipe.color->scalar));
-        densityMeta.insertMeta("lic_colormap", openvdb::StringMetadata(cmap->name()));
-        densityMeta.insertMeta("lic_color_range", openvdb::Vec2DMetadata(openvdb::Vec2d(ranges.color[0], ranges.color[1])));
-        nlohmann::json points = nlohmann::json::array();
-        for (const auto& [pos, c] : cmap->points()) points.push_back({pos, c[0], c[1], c[2]});
-        colorJson = {{"scalar", recipe.color->scalar}, {"name", cmap->name()}, {"range", {ranges.color[0], ranges.color[1]}},
-                     {"space", "sRGB"}, {"points", points}};
-    }
+    const nlohmann::json& spotsJson = desc.spots;
+    const nlohmann::json& colorJson = desc.color;
     pipeline::Written written;
     double tGather = 0.0;
     if (!job.distributed()) {

@@ -101,7 +101,8 @@ template <> struct Schema<FieldSpec>
             field("origin", &FieldSpec::origin), field("shape", &FieldSpec::shape),
             field("dtype", &FieldSpec::dtype), field("resample", &FieldSpec::resample),
             field("crop", &FieldSpec::crop), field("mask", &FieldSpec::mask),
-            field("nan_policy", &FieldSpec::nanPolicy));
+            field("nan_policy", &FieldSpec::nanPolicy), field("frames", &FieldSpec::frames),
+            field("fps", &FieldSpec::fps));
     }
 };
 template <> struct Schema<OutputSpec>
@@ -285,6 +286,18 @@ void read(const json& j, const Where& w, std::optional<double>& out)
     out = j.get<double>();
 }
 
+void read(const json& j, const Where& w, std::optional<std::array<int, 2>>& out)
+{
+    if (j.is_null()) {
+        out.reset();
+        return;
+    }
+    if (!j.is_array() || j.size() != 2) w.expected("[first, last] (two frame numbers) or null", j);
+    std::array<int, 2> v{};
+    for (std::size_t i = 0; i < 2; ++i) read(j[i], w.at(i), v[i]);
+    out = v;
+}
+
 void read(const json& j, const Where& w, std::array<double, 3>& out)
 {
     if (!j.is_array() || j.size() != 3) w.expected("[x, y, z] (an array of three numbers)", j);
@@ -380,6 +393,8 @@ json write(const std::optional<double>& v) { return v ? json(*v) : json(nullptr)
 json write(const std::array<double, 3>& v) { return write(std::vector<double>(v.begin(), v.end())); }
 
 json write(const std::optional<std::array<double, 3>>& v) { return v ? write(*v) : json(nullptr); }
+
+json write(const std::optional<std::array<int, 2>>& v) { return v ? json{(*v)[0], (*v)[1]} : json(nullptr); }
 
 json write(const std::optional<std::array<std::array<double, 3>, 2>>& v)
 {
@@ -551,6 +566,16 @@ void Recipe::validate() const
     }
 
     checkInt("animation.frames", animation.frames, 1, 10000);
+    if (field.frames) {
+        const auto [first, last] = *field.frames;
+        if (first < 0 || last < first || last - first >= 100000)
+            violation("field.frames", "[first, last] with 0 <= first <= last and at most 100000 frames",
+                      "[" + std::to_string(first) + ", " + std::to_string(last) + "]");
+        if (animation.frames > 1)
+            violation("animation.frames", "1 with an unsteady field sequence (field.frames): a sequence plays once, "
+                      "it is not a loop", std::to_string(animation.frames));
+    }
+    if (!(field.fps > 0) || !std::isfinite(field.fps) || field.fps > 1e6) violation("field.fps", "in (0, 1e6]", fmt(field.fps));
     checkInt("threads", threads, 0, 1024);
 }
 

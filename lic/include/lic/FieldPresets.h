@@ -46,6 +46,13 @@ openvdb::Coord presetDefaultResolution(const std::string& name);
 /// Calls openvdb::initialize().
 /// @throw lic::InputError for an unknown name (the message lists the valid names), or a
 ///        resolution outside [2, 2048] on any axis, or more than 2^30 voxels in total.
-PresetField makePresetField(const std::string& name, const openvdb::Coord& resolution);
+/// @a time: the moment of an unsteady preset (in the field's time unit: velocity is world units
+/// per time unit). Only `tornado` changes with time (Crawfis's funnel centre precesses, at
+/// 1 and 0.75 radians per time unit); the others are steady. Grids of a time other than 0 carry
+/// float metadata `licvdb_time`.
+PresetField makePresetField(const std::string& name, const openvdb::Coord& resolution, double time = 0.0);
+
+/// True for the presets whose velocity changes with time.
+bool presetIsUnsteady(const std::string& name);
 
 } // namespace lic

@@ -65,9 +65,15 @@ public:
     /// An empty texture, to be filled by assign().
     NoiseTexture() : mSeed(0), mFilter(NoiseFilter::Binomial), mLo(0), mDim{0, 0, 0}, mBricks{0, 0, 0} {}
 
+    /// The white-noise value of a voxel before filtering; by default whiteNoise(seed, voxel). An
+    /// unsteady bake supplies the noise carried along the flow (Unsteady.h). Must be thread-safe.
+    using RawNoise = std::function<float(const openvdb::Coord&)>;
+
     /// Recompute for another box, reusing the storage. `parallel` = false for a caller that is
-    /// itself one task of a parallel loop (a brick).
-    void assign(std::uint64_t seed, const openvdb::CoordBBox& box, NoiseFilter filter, bool parallel = true);
+    /// itself one task of a parallel loop (a brick). `raw`: the per-voxel white noise, if not
+    /// whiteNoise(seed, voxel).
+    void assign(std::uint64_t seed, const openvdb::CoordBBox& box, NoiseFilter filter, bool parallel = true,
+                const RawNoise* raw = nullptr);
     /// The box the values were computed for (the constructor's box).
     const openvdb::CoordBBox& box() const { return mBox; }
     bool built() const { return !mData.empty(); }
@@ -174,8 +180,9 @@ public:
     /// `premask(texture)`, if given, multiplies a brick's noise by a region-of-interest weight
     /// (serially: it runs inside a brick's task).
     using Premask = std::function<void(NoiseTexture&)>;
-    NoiseBrickSource(std::uint64_t seed, NoiseFilter filter, int margin, Premask premask = {})
-        : mSeed(seed), mFilter(filter), mMargin(margin), mPremask(std::move(premask))
+    NoiseBrickSource(std::uint64_t seed, NoiseFilter filter, int margin, Premask premask = {},
+                     NoiseTexture::RawNoise raw = {})
+        : mSeed(seed), mFilter(filter), mMargin(margin), mPremask(std::move(premask)), mRaw(std::move(raw))
     {
     }
     /// The noise over `brick.box` grown by the margin; the same brick asked for twice in a row on
@@ -185,7 +192,7 @@ public:
         const openvdb::CoordBBox box = brick.box.expandBy(mMargin);
         NoiseTexture& t = mTls.local();
         if (t.built() && t.box() == box) return t;
-        t.assign(mSeed, box, mFilter, false);
+        t.assign(mSeed, box, mFilter, false, mRaw ? &mRaw : nullptr);
         if (mPremask) mPremask(t);
         return t;
     }
@@ -195,6 +202,7 @@ private:
     NoiseFilter mFilter;
     int mMargin;
     Premask mPremask;
+    NoiseTexture::RawNoise mRaw;
     tbb::enumerable_thread_specific<NoiseTexture> mTls;
 };
 

@@ -42,6 +42,13 @@ struct FieldSpec
     std::string mask = "none";
     /// `nan_policy`: "refuse" (NaN/Inf is an error) | "zero" (replace with 0 and go on)
     std::string nanPolicy = "refuse";
+    /// `frames`: [first, last] frame numbers of an unsteady sequence; `path` is then a pattern
+    /// with a run of `#` (or printf `%04d`, `%d`) for the frame number. null = a single field
+    /// (or, with a pattern path, every frame found on disk)
+    std::optional<std::array<int, 2>> frames;
+    /// `fps`: frames per second of a sequence, > 0: velocity × (1 / fps) is the motion between
+    /// frames (world units per second; Blender mantaflow caches are converted, docs/inputs.md)
+    double fps = 24;
 
     bool operator==(const FieldSpec&) const = default;
 };

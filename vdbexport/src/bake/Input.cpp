@@ -55,7 +55,8 @@ lic::SpotSet makeSpotSet(const Recipe& r, const lic::OutputDomain& domain, openv
 
 } // namespace
 
-Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& scalars, const SpotShare* share)
+Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& scalars, const SpotShare* share,
+                lic::NoiseTexture::RawNoise raw)
 {
     const Recipe& r = plan.recipe;
     Input in;
@@ -76,7 +77,7 @@ Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& sc
         };
     }
     in.noise = std::make_unique<lic::NoiseBrickSource>(r.input.seed, lic::noiseFilterFromString(r.input.noiseFilter),
-                                                       lic::ghostMargin(plan.settings), std::move(premask));
+                                                       lic::ghostMargin(plan.settings), std::move(premask), std::move(raw));
     return in;
 }
 

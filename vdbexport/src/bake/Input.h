@@ -34,6 +34,9 @@ struct SpotShare
 
 /// `share`: null for the whole bake (one process).
 /// @throw lic::InputError for a surface scalar without ridges above its threshold.
-Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& scalars, const SpotShare* share = nullptr);
+/// `raw`: the noise bake's per-voxel white noise when it is not the seed's (an unsteady
+/// sequence's carried noise, lic/Unsteady.h).
+Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& scalars, const SpotShare* share = nullptr,
+                lic::NoiseTexture::RawNoise raw = {});
 
 } // namespace vdbexport::pipeline

@@ -3,6 +3,8 @@
 #include "vdbexport/Bake.h"
 #include "vdbexport/VdbIO.h"
 
+#include "lic/Colormap.h"
+
 #include <filesystem>
 
 namespace vdbexport::pipeline {
@@ -21,6 +23,77 @@ openvdb::BBoxd worldBBoxOf(const openvdb::GridBase& grid)
         openvdb::BBoxd(ib.min().asVec3d() - openvdb::Vec3d(0.5), ib.max().asVec3d() + openvdb::Vec3d(0.5)));
 }
 
+Description describeBake(const Plan& plan, const nlohmann::json& resolved, const std::string& fieldGrid, int brickDim,
+                         std::uint64_t spotCount, const Ranges& ranges, const lic::Colormap* cmap)
+{
+    const Recipe& recipe = plan.recipe;
+    Description d;
+    d.densityMeta.insertMeta("licvdb_version", openvdb::StringMetadata(LICVDB_VERSION));
+    d.densityMeta.insertMeta("licvdb_recipe", openvdb::StringMetadata(resolved.dump()));
+    d.densityMeta.insertMeta("licvdb_field_grid", openvdb::StringMetadata(fieldGrid));
+    d.densityMeta.insertMeta("lic_engine", openvdb::StringMetadata(recipe.lic.engine));
+    d.densityMeta.insertMeta("lic_kernel", openvdb::StringMetadata(recipe.lic.kernel));
+    d.densityMeta.insertMeta("lic_length", openvdb::FloatMetadata(float(recipe.lic.length)));
+    d.densityMeta.insertMeta("lic_step", openvdb::FloatMetadata(float(recipe.lic.step)));
+    d.densityMeta.insertMeta("lic_brick", openvdb::Int32Metadata(brickDim));
+    if (plan.settings.kernel == lic::KernelType::Exp) {
+        d.densityMeta.insertMeta("lic_decay", openvdb::FloatMetadata(float(recipe.lic.decay)));
+        d.densityMeta.insertMeta("lic_orientation", openvdb::StringMetadata("bright head downstream"));
+    }
+    d.densityMeta.insertMeta("lic_input", openvdb::StringMetadata(recipe.input.type));
+    if (plan.spots) {
+        const std::string placement = recipe.input.surface ? "surface" : recipe.input.distribution;
+        d.densityMeta.insertMeta("lic_spot_count", openvdb::Int64Metadata(openvdb::Int64(spotCount)));
+        d.densityMeta.insertMeta("lic_spot_placement", openvdb::StringMetadata(placement));
+        d.densityMeta.insertMeta("lic_halo_scale", openvdb::FloatMetadata(float(recipe.input.haloScale)));
+        d.spots = {{"count", spotCount}, {"placement", placement},
+                   {"spacing", recipe.input.spacing}, {"radii", recipe.input.radii},
+                   {"halo_scale", recipe.input.haloScale}, {"line_peaks", plan.linePeak}, {"halo_peaks", plan.haloPeak}};
+        if (recipe.width) {
+            d.densityMeta.insertMeta("lic_width_scalar", openvdb::StringMetadata(recipe.width->scalar));
+            d.densityMeta.insertMeta("lic_width_range",
+                                     openvdb::Vec2DMetadata(openvdb::Vec2d(ranges.width[0], ranges.width[1])));
+            d.spots["width"] = {{"scalar", recipe.width->scalar}, {"range", ranges.width},
+                                {"invert", recipe.width->invert}};
+        }
+    }
+    if (recipe.color) {
+        d.densityMeta.insertMeta("lic_color_scalar", openvdb::StringMetadata(recipe.color->scalar));
+        d.densityMeta.insertMeta("lic_colormap", openvdb::StringMetadata(cmap->name()));
+        d.densityMeta.insertMeta("lic_color_range", openvdb::Vec2DMetadata(openvdb::Vec2d(ranges.color[0], ranges.color[1])));
+        nlohmann::json points = nlohmann::json::array();
+        for (const auto& [pos, c] : cmap->points()) points.push_back({pos, c[0], c[1], c[2]});
+        d.color = {{"scalar", recipe.color->scalar}, {"name", cmap->name()}, {"range", {ranges.color[0], ranges.color[1]}},
+                   {"space", "sRGB"}, {"points", points}};
+    }
+    return d;
+}
+
+void stageFrame(const Recipe& recipe, openvdb::GridPtrVec& grids, const openvdb::MetaMap& densityMeta, int frameNumber,
+                const std::string& path, OutputSet& output)
+{
+    openvdb::GridBase& density = *grids.front();
+    for (auto it = densityMeta.beginMeta(); it != densityMeta.endMeta(); ++it) density.insertMeta(it->first, *it->second);
+    density.insertMeta("lic_frame", openvdb::Int32Metadata(frameNumber));
+    if (recipe.output.half)
+        for (const auto& g : grids) g->setSaveFloatAsHalf(true);
+    output.addVdb(path, grids);
+}
+
+nlohmann::json gridsJson(const openvdb::GridPtrVec& grids)
+{
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& g : grids) {
+        const openvdb::Vec3d vs = g->voxelSize();
+        out.push_back({{"name", g->getName()},
+                       {"type", g->valueType()},
+                       {"active_voxels", g->activeVoxelCount()},
+                       {"voxel_size", {vs[0], vs[1], vs[2]}},
+                       {"world_bbox", bboxJson(worldBBoxOf(*g))}});
+    }
+    return out;
+}
+
 Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::MetaMap& densityMeta,
                     lic::Progress& progress, const FrameHook& gather)
 {
@@ -34,12 +107,7 @@ Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::Met
             if (progress.wasInterrupted()) throw lic::Cancelled();
             openvdb::GridPtrVec grids = compositor.frame(f);
             if (gather) gather(f, grids);
-            openvdb::GridBase& density = *grids.front();
-            for (auto it = densityMeta.beginMeta(); it != densityMeta.endMeta(); ++it) density.insertMeta(it->first, *it->second);
-            density.insertMeta("lic_frame", openvdb::Int32Metadata(f));
-            if (r.output.half)
-                for (const auto& g : grids) g->setSaveFloatAsHalf(true);
-            out.output->addVdb(out.paths[std::size_t(f - 1)], grids);
+            stageFrame(r, grids, densityMeta, f, out.paths[std::size_t(f - 1)], *out.output);
             if (f == 1) out.firstGrids = grids;
             progress.advance(1);
         }
@@ -63,15 +131,7 @@ void writeManifest(const Plan& plan, const Written& written, double voxelSize, c
     manifest["input"] = plan.recipe.input.type;
     manifest["spots"] = spotsJson;
     manifest["range"] = colorJson.is_null() ? nlohmann::json(nullptr) : colorJson["range"];
-    manifest["grids"] = nlohmann::json::array();
-    for (const auto& g : written.firstGrids) {
-        const openvdb::Vec3d vs = g->voxelSize();
-        manifest["grids"].push_back({{"name", g->getName()},
-                                     {"type", g->valueType()},
-                                     {"active_voxels", g->activeVoxelCount()},
-                                     {"voxel_size", {vs[0], vs[1], vs[2]}},
-                                     {"world_bbox", bboxJson(worldBBoxOf(*g))}});
-    }
+    manifest["grids"] = gridsJson(written.firstGrids);
     for (const auto& p : written.paths) manifest["sha256"][fs::path(p).filename().string()] = written.output->sha256(p);
     written.output->addText(manifestPath(plan.recipe.output.path), manifest.dump(2) + "\n");
     written.output->commit(); // frames first, manifest last, under a lock on the directory

@@ -32,6 +32,25 @@ struct Written
 /// bake adds the other processes' leaves.
 using FrameHook = std::function<void(int frame, openvdb::GridPtrVec& grids)>;
 
+/// What a bake's files say about it: the metadata on every frame's `density` grid (version,
+/// recipe, engine, kernel, spots, colour; not the frame counters) and the manifest's `spots` and
+/// `colormap` sections (null when unused).
+struct Description
+{
+    openvdb::MetaMap densityMeta;
+    nlohmann::json spots = nullptr, color = nullptr;
+};
+Description describeBake(const Plan& plan, const nlohmann::json& resolved, const std::string& fieldGrid, int brickDim,
+                         std::uint64_t spotCount, const Ranges& ranges, const lic::Colormap* cmap);
+
+/// Stage one frame's grids for `path`: `densityMeta` and `lic_frame` = frameNumber on `density`,
+/// half floats if the recipe asks.
+void stageFrame(const Recipe& recipe, openvdb::GridPtrVec& grids, const openvdb::MetaMap& densityMeta, int frameNumber,
+                const std::string& path, OutputSet& output);
+
+/// The manifest's `grids` section: name, type, active voxels, voxel size and world bounds of each.
+nlohmann::json gridsJson(const openvdb::GridPtrVec& grids);
+
 /// Write every frame: `densityMeta` goes on each frame's `density` grid, with `lic_frame`.
 Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::MetaMap& densityMeta,
                     lic::Progress& progress, const FrameHook& gather = {});

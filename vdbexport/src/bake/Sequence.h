@@ -1,0 +1,25 @@
+// An unsteady bake: a field sequence in, one carried-texture LIC frame per field frame out.
+#pragma once
+
+#include "vdbexport/Recipe.h"
+
+#include "lic/Colormap.h"
+#include "lic/Progress.h"
+
+#include <nlohmann/json.hpp>
+
+#include <string>
+
+namespace vdbexport::pipeline {
+
+/// Bake every frame of the recipe's field sequence (vdbexport::isSequenceBake): frames
+/// OUT_FFFF.vdb numbered as the field's, one manifest, all committed together at the end.
+/// Returns the summary `licvdb bake --json` prints (per-frame counters and seconds).
+/// @throw lic::InputError for bad input (missing frames, frames that disagree, …); lic::Cancelled.
+nlohmann::json bakeSequence(const Recipe& recipe, lic::Progress& progress);
+
+/// A colormap by name, or from a value,r,g,b .csv file.
+/// @throw lic::InputError for an unknown name or an unreadable or malformed file.
+lic::Colormap loadColormap(const std::string& spec);
+
+} // namespace vdbexport::pipeline
