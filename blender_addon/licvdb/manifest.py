@@ -55,6 +55,8 @@ class Manifest:
     colormap: Colormap | None = None
     recipe: dict = field(default_factory=dict)
     version: str = ""
+    unsteady: bool = False  # frames of an unsteady field sequence, numbered as its frames
+    first_frame: int = 1  # unsteady: the field's first frame number (plays from that scene frame)
 
     def grid(self, name: str) -> GridInfo | None:
         return next((g for g in self.grids if g.name == name), None)
@@ -107,7 +109,8 @@ def parse_manifest(data: dict, path: str) -> Manifest:
         voxel = grids[0].voxel_size[0]
     return Manifest(path=os.path.abspath(path), files=files, frames=int(data.get("frames", len(files))),
                     cyclic=bool(data.get("cyclic", False)), voxel_size=float(voxel or 0.0), grids=grids,
-                    colormap=cmap, recipe=data.get("recipe") or {}, version=str(data.get("licvdb_version", "")))
+                    colormap=cmap, recipe=data.get("recipe") or {}, version=str(data.get("licvdb_version", "")),
+                    unsteady=bool(data.get("unsteady", False)), first_frame=int(data.get("first_frame", 1)))
 
 
 def read_manifest(path: str) -> Manifest:

@@ -42,6 +42,11 @@ def cache_data_file(ds, frame: int) -> str:
     return os.path.join(bpy.path.abspath(ds.cache_directory), "data", f"fluid_data_{frame:04d}.vdb")
 
 
+def cache_data_pattern(ds) -> str:
+    """The cache's data files as a licvdb frame pattern (fluid_data_####.vdb)."""
+    return os.path.join(bpy.path.abspath(ds.cache_directory), "data", "fluid_data_####.vdb")
+
+
 def domain_local_cell(obj, ds) -> Vector:
     """Size of one simulation cell in the domain object's local units."""
     corners = [Vector(c) for c in obj.bound_box]
@@ -282,11 +287,21 @@ def plan_bake(context, obj):
     # Every bake gets a new name: Blender does not notice a .vdb overwritten in place.
     run = time.strftime("%Y%m%d_%H%M%S") + f"_{int(time.time() * 1000) % 1000:03d}"
     base = os.path.join(out_dir, f"{bpy.path.clean_name(obj.name)}_lic_{run}")
-    tasks, outs = [], []
-    for f in frames:
-        out = f"{base}_{f:04d}.vdb" if len(frames) > 1 else f"{base}_f{f:04d}.vdb"
-        tasks.append((f"frame {f}", make_recipe(settings, cache_data_file(ds, f), out, settings.loop_frames)))
-        outs.append(out)
+    if len(frames) > 1:
+        # One coherent unsteady sequence: the texture is carried by the smoke from frame to frame
+        # (licvdb writes BASE_FFFF.vdb numbered as the cache, and one manifest).
+        recipe = make_recipe(settings, cache_data_pattern(ds), f"{base}.vdb", 1)
+        recipe["field"]["frames"] = [frames[0], frames[-1]]
+        # Mantaflow's velocities are converted to world units per second by licvdb; the scene's
+        # frame rate (slowed by the simulation's time scale) gives the time between frames.
+        fps = context.scene.render.fps / context.scene.render.fps_base
+        recipe["field"]["fps"] = fps / max(ds.time_scale, 1e-6)
+        tasks = [(f"frames {frames[0]}-{frames[-1]}", recipe)]
+        outs = [f"{base}_{f:04d}.vdb" for f in frames]
+    else:
+        out = f"{base}_f{frames[0]:04d}.vdb"
+        tasks = [(f"frame {frames[0]}", make_recipe(settings, cache_data_file(ds, frames[0]), out, settings.loop_frames))]
+        outs = [out]
     job = BakeJob(exe, tasks)
     domain_name = obj.name
     loop_frames = settings.loop_frames

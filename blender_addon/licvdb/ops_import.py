@@ -42,7 +42,8 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
     Grids stay where licvdb put them in world space: the object has the identity transform, or
     a −½ voxel translation where Cycles needs it (prefs.half_voxel_shift).
     A loop (or any numbered sequence) becomes a volume sequence starting at ``frame_start``
-    (default: the scene's start frame); cyclic bakes repeat forever. ``files`` overrides the
+    (default: an unsteady sequence's first frame, else the scene's start frame); cyclic bakes
+    repeat forever, sequences play once (CLIP). ``files`` overrides the
     file list (frames of a sequence baked one by one). Raises BakeImportError.
     """
     if files:
@@ -74,7 +75,9 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
         first_num = mf.frame_number(first) or 1
         vol.is_sequence = True
         vol.frame_duration = n
-        vol.frame_start = scene.frame_start if frame_start is None else frame_start
+        if frame_start is None:  # an unsteady sequence plays in step with its simulation's frames
+            frame_start = man.first_frame if man and man.unsteady else scene.frame_start
+        vol.frame_start = frame_start
         # Blender shows file number (scene frame − frame_start + 1, wrapped by the mode) + offset.
         vol.frame_offset = first_num - 1
         cyclic = man.cyclic if man else False

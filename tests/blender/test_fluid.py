@@ -10,7 +10,7 @@ import pytest
 from mathutils import Matrix, Vector
 
 from conftest import licvdb_exe, run_licvdb
-from licvdb import ops_bake
+from licvdb import ops_bake, ops_import
 
 RES = 16
 DOMAIN_LOC = (0.3, -0.2, 0.5)  # a size-2 cube: local box [-1, 1]³
@@ -147,6 +147,14 @@ def test_bake_fluid_frame_range_is_a_sequence(smoke):
     grids = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data.grids
     assert grids.frame == 3 and grids.frame_filepath.endswith("_0003.vdb")
     assert grids.is_loaded or grids.load()
+    # One coherent unsteady bake (the texture carried by the smoke), not three separate stills.
+    import pyopenvdb as vdb
+    meta = {g.name: g for g in vdb.readAllGridMetadata(grids.frame_filepath)}["density"]
+    assert meta["lic_unsteady"] is True and meta["lic_cyclic"] is False
+    assert meta["lic_frame"] == 3 and meta["lic_first_frame"] == 2 and meta["lic_frames"] == 3
+    # Imported again from any of its files, the sequence plays in step with the simulation.
+    again = ops_import.import_bake(bpy.context, grids.frame_filepath)
+    assert again.data.frame_start == 2 and again.data.sequence_mode == "CLIP" and again.data.frame_duration == 3
 
 
 def test_bake_fluid_one_frame_as_a_loop(smoke):

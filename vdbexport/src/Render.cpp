@@ -174,18 +174,23 @@ std::vector<std::string> renderInputs(const std::string& input, int frames)
     // A sequence: IN may be OUT_0001.vdb (its first frame) or OUT.vdb.
     const fs::path p(input);
     std::string stem = p.stem().string();
-    static const std::regex numbered("(.*)_([0-9]{4})");
+    static const std::regex numbered("(.*)_([0-9]{4,9})");
     std::smatch m;
-    if (std::regex_match(stem, m, numbered)) stem = m[1].str();
+    int first = 1; // an unsteady sequence starts at its field's first frame: IN = OUT_0010.vdb
+    if (std::regex_match(stem, m, numbered)) {
+        stem = m[1].str();
+        first = std::stoi(m[2].str());
+    }
     std::vector<std::string> files;
-    for (int f = 1; f <= frames; ++f) {
+    for (int f = first; f < first + frames; ++f) {
         char suffix[16];
         std::snprintf(suffix, sizeof suffix, "_%04d", f);
         const std::string file = (p.parent_path() / (stem + suffix + p.extension().string())).string();
         if (!fs::exists(file, ec))
-            throw lic::InputError("frame " + std::to_string(f) + " of " + std::to_string(frames) + " (" + quote(file) +
-                                  ") does not exist; expected a sequence " + stem + "_0001" + p.extension().string() +
-                                  " …");
+            throw lic::InputError("frame " + std::to_string(f) + " (" + std::to_string(f - first + 1) + " of " +
+                                  std::to_string(frames) + ", " + quote(file) + ") does not exist; expected a sequence " +
+                                  stem + "_" + std::string(4 - std::min<std::size_t>(4, std::to_string(first).size()), '0') +
+                                  std::to_string(first) + p.extension().string() + " …");
         files.push_back(file);
     }
     return files;
@@ -342,7 +347,15 @@ nlohmann::json render(const RenderJob& job, lic::Progress& progress)
             if (gifOut) {
                 gifFrames.push_back(std::move(img));
             } else {
-                const std::string path = imageFramePath(job.output, f, frames);
+                // Images are numbered as their files (an unsteady sequence's field frames).
+                int number = f;
+                {
+                    static const std::regex numbered(".*_([0-9]{4,9})");
+                    std::smatch nm;
+                    const std::string stem = fs::path(inputs[std::size_t(f - 1)]).stem().string();
+                    if (std::regex_match(stem, nm, numbered)) number = std::stoi(nm[1].str());
+                }
+                const std::string path = imageFramePath(job.output, number, frames);
                 writeImageAtomic(path, img, display,
                                  {{"Software", std::string("licvdb ") + LICVDB_VERSION},
                                   {"ImageDescription", "licvdb render of " + inputs[std::size_t(f - 1)]}});
