@@ -2,7 +2,9 @@
 """Write one axis-aligned slice of a float grid (default `density`) as a greyscale PNG.
 
 A quick look at a bake before the reference renderer: slice_png.py IN.vdb OUT.png [--axis z]
-[--index N] [--grid density] [--scale 2]. Uses Debian's python3-openvdb and numpy only.
+[--index N] [--grid density] [--scale 2] [--slab N] [--range LO,HI]. Uses Debian's python3-openvdb and numpy only.
+`--slab N` writes the maximum over N consecutive slices centred on the index instead of one slice
+(e.g. a layer of spot centres one spacing thick, seen as a 2D point distribution).
 """
 import argparse
 import struct
@@ -33,6 +35,10 @@ def main():
     ap.add_argument("--axis", choices="xyz", default="z")
     ap.add_argument("--index", type=int, default=None, help="slice index (default: middle)")
     ap.add_argument("--scale", type=int, default=2, help="pixel repeat factor")
+    ap.add_argument("--slab", type=int, default=1,
+                    help="maximum over this many slices centred on the index (default 1: one slice)")
+    ap.add_argument("--range", default="0,1",
+                    help="LO,HI: the values shown black to white (default 0,1)")
     ap.add_argument("--color", action="store_true",
                     help="multiply density by the vec3 `color` grid (scene-linear) and write sRGB")
     a = ap.parse_args()
@@ -43,7 +49,11 @@ def main():
     grid.copyToArray(arr, ijk=lo)
     ax = "xyz".index(a.axis)
     idx = dims[ax] // 2 if a.index is None else a.index - lo[ax]
-    sl = np.take(arr, idx, axis=ax)
+    first = max(0, idx - (a.slab - 1) // 2)
+    slab = np.take(arr, range(first, min(dims[ax], first + a.slab)), axis=ax)
+    sl = slab.max(axis=ax)
+    lo_v, hi_v = (float(v) for v in a.range.split(","))
+    sl = (sl - lo_v) / (hi_v - lo_v)
     if a.color:
         cgrid = vdb.read(a.vdb, "color")
         carr = np.zeros(dims + (3,), dtype=np.float32)

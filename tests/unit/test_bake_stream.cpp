@@ -6,6 +6,7 @@
 
 #include "bake/Scalars.h"
 
+#include "lic/Error.h"
 #include "lic/FieldPresets.h"
 #include "lic/Scalars.h"
 
@@ -302,4 +303,30 @@ TEST_F(StreamBake, StreamedPercentilesAreExact)
             EXPECT_EQ(got[1], expected[1]) << name;
         }
     }
+}
+
+TEST(ScalarSet, AbsSuffixIsTheMagnitudeOfAnyScalar)
+{
+    // The tabbed jet's counter-rotating vortex pairs give streamwise vorticity of both signs.
+    openvdb::initialize();
+    const lic::PresetField f = lic::makePresetField("tabbed-jet", openvdb::Coord(16, 16, 24));
+    std::map<std::string, openvdb::FloatGrid::Ptr> file;
+    for (const auto& s : f.scalars) file[s->getName()] = s;
+    vdbexport::pipeline::ScalarSet set(*f.velocity, file);
+    for (const std::string base : {"streamwise-vorticity", "temperature", "speed-gradient"}) {
+        const auto signedGrid = set.get(base);
+        const auto mag = set.get(base + "-abs");
+        EXPECT_EQ(mag->getName(), base + "-abs");
+        EXPECT_EQ(mag->activeVoxelCount(), signedGrid->activeVoxelCount()) << base;
+        EXPECT_EQ(mag.get(), set.get(base + "-abs").get()) << base << ": computed once";
+        auto acc = signedGrid->getConstAccessor();
+        std::size_t negatives = 0;
+        for (auto it = mag->cbeginValueOn(); it; ++it) {
+            const float s = acc.getValue(it.getCoord());
+            negatives += s < 0.0f;
+            ASSERT_EQ(*it, std::abs(s)) << base << " at " << it.getCoord();
+        }
+        if (base == "streamwise-vorticity") EXPECT_GT(negatives, 100u);
+    }
+    EXPECT_THROW(set.get("no-such-grid-abs"), lic::InputError);
 }

@@ -213,7 +213,7 @@ int main(int argc, char** argv)
     auto* oContrast = bake->add_option("--contrast", cli.output.contrast, "stretch|none [stretch]");
     std::string colorScalar, colormap;
     bake->add_option("--color", colorScalar,
-                     "Colour by a scalar: speed, vorticity, streamwise-vorticity, helicity, q-criterion, lambda2, or a float grid of the field file");
+                     "Colour by a scalar: speed, vorticity, streamwise-vorticity, helicity, q-criterion, lambda2, or a float grid of the field file; NAME-abs = |NAME|, NAME-gradient = |grad NAME|");
     auto* oColormap = bake->add_option("--colormap", colormap,
                                        "heated-object|red-yellow|grey-purple|viridis|magma|inferno|cividis|coolwarm or a value,r,g,b .csv [viridis]");
     std::string fieldOrigin, fieldShape, fieldCrop;
@@ -247,7 +247,7 @@ int main(int argc, char** argv)
     auto* oHaloScale = bake->add_option("--halo-scale", cli.input.haloScale, "Spots: halo radius / line radius, >= 1 [2]");
     bake->add_option("--surface", surfaceScalar, "Spots on the ridge surface of a scalar (e.g. speed-gradient = |grad speed|)");
     auto* oSurfaceThreshold = bake->add_option("--surface-threshold", surfaceThreshold, "--surface: ridge points need scalar > this [0]");
-    bake->add_option("--roi", roiScalar, "Region of interest by a scalar (speed, vorticity, a float grid, NAME-gradient)");
+    bake->add_option("--roi", roiScalar, "Region of interest by a scalar (speed, vorticity, a float grid, NAME-gradient, NAME-abs)");
     bake->add_option("--roi-range", roiRange, "--roi: kept range LO,HI in the scalar's units");
     auto* oRoiMode = bake->add_option("--roi-mode", roiMode, "--roi: pre (mask the input; lines leave along the flow) | post (mask the output) [pre]");
     bake->add_option("--width", widthScalar, "Spots: pick the width level per voxel by a scalar (needs 2+ radii)");

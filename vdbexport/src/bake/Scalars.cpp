@@ -57,12 +57,25 @@ void setPartOf(openvdb::GridBase& grid, const openvdb::CoordBBox& whole, const o
 openvdb::FloatGrid::ConstPtr ScalarSet::get(const std::string& name)
 {
     const std::lock_guard lock(mMutex);
+    return resolve(name);
+}
+
+openvdb::FloatGrid::ConstPtr ScalarSet::resolve(const std::string& name)
+{
     if (auto it = mCache.find(name); it != mCache.end()) return it->second;
     static const std::string kGradient = "-gradient";
+    static const std::string kAbs = "-abs";
     const bool part = isPart(mVelocity);
     openvdb::FloatGrid::ConstPtr g;
-    if (name.size() > kGradient.size() && name.ends_with(kGradient)) {
-        const auto base = lic::resolveScalar(mVelocity, mFile, name.substr(0, name.size() - kGradient.size()));
+    if (name.size() > kAbs.size() && name.ends_with(kAbs)) {
+        // |NAME|: same topology (and part boxes) as NAME, every active value made non-negative.
+        const auto base = resolve(name.substr(0, name.size() - kAbs.size()));
+        auto mag = base->deepCopy();
+        mag->setName(name);
+        for (auto it = mag->beginValueOn(); it; ++it) it.setValue(std::abs(*it));
+        g = mag;
+    } else if (name.size() > kGradient.size() && name.ends_with(kGradient)) {
+        const auto base = resolve(name.substr(0, name.size() - kGradient.size()));
         auto grad = lic::gradientMagnitude(*base, name);
         // Same active topology as its base: a part's boxes are the base's.
         if (isPart(*base)) setPartOf(*grad, activeBoxOf(*base), partBoxOf(*base));

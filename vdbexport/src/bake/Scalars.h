@@ -19,8 +19,9 @@
 
 namespace vdbexport::pipeline {
 
-/// Scalars of a bake by name: derived (speed, vorticity, …), a float grid of the field file, or
-/// NAME-gradient = |∇NAME|. Each is computed once (thread-safe).
+/// Scalars of a bake by name: derived (speed, vorticity, …), a float grid of the field file,
+/// NAME-gradient = |∇NAME|, or NAME-abs = |NAME| (e.g. streamwise-vorticity-abs: the magnitude of
+/// a signed scalar). Suffixes nest (speed-gradient-abs). Each is computed once (thread-safe).
 class ScalarSet
 {
 public:
@@ -32,6 +33,8 @@ public:
     openvdb::FloatGrid::ConstPtr get(const std::string& name);
 
 private:
+    openvdb::FloatGrid::ConstPtr resolve(const std::string& name); // get() without the lock
+
     const openvdb::Vec3SGrid& mVelocity;
     const std::map<std::string, openvdb::FloatGrid::Ptr>& mFile;
     std::map<std::string, openvdb::FloatGrid::ConstPtr> mCache;
