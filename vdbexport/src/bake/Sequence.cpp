@@ -209,8 +209,8 @@ nlohmann::json bakeSequence(const Recipe& request, lic::Progress& outer)
                 input.spots = flock->current();
             }
             input.spotCount = input.spots.centers.size();
-            const auto& fs = flock->stats();
-            carried = {{"spots", input.spotCount}, {"born", fs.born}, {"left", fs.left}, {"retiring", fs.retiring}};
+            const lic::SpotFlock::Stats& moved = flock->stats();
+            carried = {{"spots", input.spotCount}, {"born", moved.born}, {"left", moved.left}, {"retiring", moved.retiring}};
         } else {
             if (k == 0) noise.start(domain);
             else noise.advance(domain, field, dt);
