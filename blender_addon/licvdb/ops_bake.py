@@ -269,12 +269,14 @@ def plan_bake(context, obj):
         raise BakeError(prefs.missing_executable_message(context))
     settings = context.scene.licvdb_bake
     if settings.use_frame_range:
-        if settings.frame_end < settings.frame_start:
-            raise BakeError(f"frame range {settings.frame_start}-{settings.frame_end} is empty")
+        first, last = ((ds.cache_frame_start, ds.cache_frame_end) if settings.range_from_cache
+                       else (settings.frame_start, settings.frame_end))
+        if last < first:
+            raise BakeError(f"frame range {first}-{last} is empty")
         if settings.loop_frames > 1:
             raise BakeError("loop frames > 1 bakes one simulation frame as a loop: turn off Frame range "
                             "or set Loop frames to 1")
-        frames = list(range(settings.frame_start, settings.frame_end + 1))
+        frames = list(range(first, last + 1))
     else:
         frames = [context.scene.frame_current]
     missing = [f for f in frames if not os.path.isfile(cache_data_file(ds, f))]

@@ -76,7 +76,9 @@ class LICVDB_PT_bake(bpy.types.Panel):
         sub.prop(s, "colormap")
         layout.prop(s, "use_frame_range")
         if s.use_frame_range:
+            layout.prop(s, "range_from_cache")
             row = layout.row(align=True)
+            row.enabled = not s.range_from_cache
             row.prop(s, "frame_start")
             row.prop(s, "frame_end")
         else:

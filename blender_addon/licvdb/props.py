@@ -127,7 +127,12 @@ class LICVDB_BakeSettings(bpy.types.PropertyGroup):
     loop_frames: bpy.props.IntProperty(name="Loop frames", default=1, min=1, max=1000,
                                        description="> 1: bake one simulation frame as a seamless animated loop")
     use_frame_range: bpy.props.BoolProperty(name="Frame range", default=False,
-                                            description="Bake every simulation frame of a range, as a sequence")
+                                            description="Bake every simulation frame of a range as one coherent sequence "
+                                                        "(the texture moves with the smoke)")
+    range_from_cache: bpy.props.BoolProperty(
+        name="Cached range", default=True,
+        description="Bake the domain's cache frame range (Physics > Fluid > Cache > Frame Start/End); "
+                    "off: the Start and End below")
     frame_start: bpy.props.IntProperty(name="Start", default=1, min=0)
     frame_end: bpy.props.IntProperty(name="End", default=10, min=0)
     output_dir: bpy.props.StringProperty(name="Output", subtype="DIR_PATH", default="",

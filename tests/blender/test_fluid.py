@@ -136,6 +136,7 @@ def test_bake_fluid_current_frame(smoke, tmp_path):
 def test_bake_fluid_frame_range_is_a_sequence(smoke):
     s = bpy.context.scene.licvdb_bake
     s.use_frame_range = True
+    s.range_from_cache = False
     s.frame_start, s.frame_end = 2, 4
     s.color_scalar = "NONE"
     assert bpy.ops.licvdb.bake_fluid() == {"FINISHED"}
@@ -155,6 +156,32 @@ def test_bake_fluid_frame_range_is_a_sequence(smoke):
     # Imported again from any of its files, the sequence plays in step with the simulation.
     again = ops_import.import_bake(bpy.context, grids.frame_filepath)
     assert again.data.frame_start == 2 and again.data.sequence_mode == "CLIP" and again.data.frame_duration == 3
+
+
+def test_bake_fluid_cached_range_is_one_coherent_sequence(smoke):
+    """By default a frame range is the domain's cache range (1-4 here), baked as one sequence whose
+    texture is carried by the smoke: consecutive frames are alike, but not identical."""
+    import pyopenvdb as vdb
+    s = bpy.context.scene.licvdb_bake
+    s.use_frame_range = True
+    s.color_scalar = "NONE"
+    s.length = 4.0
+    assert bpy.ops.licvdb.bake_fluid() == {"FINISHED"}
+    vol = bpy.context.active_object.data
+    assert vol.is_sequence and vol.frame_start == 1 and vol.frame_duration == FRAMES and vol.sequence_mode == "CLIP"
+    first = vol.filepath
+    assert first.endswith("_0001.vdb")
+    metas = [{g.name: g for g in vdb.readAllGridMetadata(first.replace("_0001.vdb", f"_{f:04d}.vdb"))}["density"]
+             for f in range(1, FRAMES + 1)]
+    assert [m["lic_frame"] for m in metas] == list(range(1, FRAMES + 1))
+    assert all(m["lic_unsteady"] for m in metas)
+    a = vdb.read(first.replace("_0001.vdb", "_0003.vdb"), "density")
+    b = vdb.read(first.replace("_0001.vdb", "_0004.vdb"), "density")
+    acc = b.getConstAccessor()
+    pairs = [(it.value, acc.getValue(it.min)) for it in a.citerOnValues() if it.count == 1]
+    x, y = np.array(pairs).T
+    r = float(np.corrcoef(x, y)[0, 1])
+    assert 0.3 < r < 0.999, f"frames 3 and 4 correlate {r}: carried texture should be alike, not identical"
 
 
 def test_bake_fluid_one_frame_as_a_loop(smoke):
