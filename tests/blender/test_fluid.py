@@ -280,3 +280,28 @@ def test_licvdb_progress_lines(tmp_path):
     bad = subprocess.run([licvdb_exe(), "bake", "--field", str(field), "--out", str(tmp_path / "b.vdb"),
                           "--progress", "dots"], capture_output=True, text=True)
     assert bad.returncode == 2 and "--progress" in bad.stderr
+
+
+def test_sequence_bake_cancel_leaves_no_files(tmp_path):
+    """Esc during a sequence bake: frames already made are staged, not written, so once the
+    second frame has started, cancelling still leaves nothing. Progress names the frame."""
+    fields = tmp_path / "fields"
+    fields.mkdir()
+    run_licvdb("field", "tornado", "--res", "24,24,24", "--frames", "1,3", "--out", fields / "t_####.vdb", "--quiet")
+    out = tmp_path / "out"
+    out.mkdir()
+    recipe = {"field": {"path": str(fields / "t_####.vdb"), "frames": [1, 3]},
+              "output": {"path": str(out / "seq.vdb"), "upsample": 3},
+              "lic": {"length": 16, "engine": "naive"}, "threads": 1}
+    job = ops_bake.BakeJob(licvdb_exe(), [("frames 1-3", recipe)])
+    job.start()
+    t0 = time.monotonic()
+    while not any(s.startswith("frame 2 (2/3)") for s, _ in job.progress_seen) and time.monotonic() - t0 < 120.0:
+        assert not job.poll(), "the sequence finished before it could be cancelled; make it bigger"
+        job.fraction
+        time.sleep(0.05)
+    assert any(s.startswith("frame 1 (1/3)") for s, _ in job.progress_seen), job.progress_seen[:5]
+    assert any(s.startswith("frame 2 (2/3)") for s, _ in job.progress_seen)
+    job.cancel()
+    assert job.proc.returncode == 1
+    assert os.listdir(out) == []
