@@ -32,6 +32,15 @@ def manifest_path(vdb_path: str) -> str:
     return (root if ext.lower() == ".vdb" else vdb_path) + MANIFEST_SUFFIX
 
 
+def bake_name(manifest_file: str) -> str:
+    """The bake's name from its manifest: ``loop.licvdb.json`` (or an old ``loop.json``) → ``loop``."""
+    base = os.path.basename(manifest_file)
+    for suffix in (MANIFEST_SUFFIX, LEGACY_MANIFEST_SUFFIX):
+        if base.endswith(suffix):
+            return base[:-len(suffix)]
+    return os.path.splitext(base)[0]
+
+
 class ManifestError(Exception):
     """A manifest that is missing, unreadable or not in licvdb's format."""
 

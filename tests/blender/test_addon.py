@@ -59,6 +59,7 @@ def test_sequence_and_manifest_helpers(tmp_path):
     assert mf.manifest_candidates("/a/loop_0003.vdb") == ["/a/loop_0003.licvdb.json", "/a/loop_0003.json",
                                                          "/a/loop.licvdb.json", "/a/loop.json"]
     assert mf.manifest_path("/a/jet.vdb") == "/a/jet.licvdb.json"
+    assert mf.bake_name("/a/jet.licvdb.json") == "jet" and mf.bake_name("/a/jet.json") == "jet"
     with pytest.raises(mf.ManifestError, match="not a licvdb manifest"):
         mf.parse_manifest({"foo": 1}, "m.json")
 
