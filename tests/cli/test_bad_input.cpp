@@ -319,21 +319,39 @@ TEST_F(InputsTest, BakeDoesNotOverwriteItsInputs)
     EXPECT_EQ(readText(recipe), recipeBytes);
 }
 
-// A recipe named like its output (jet.json for jet.vdb) is fine: the manifest is jet.licvdb.json
-// (it was jet.json, and such bakes were refused), for a still and for a loop.
+// A recipe run from another directory: its relative paths are taken from the working directory,
+// and the message says which one (the field and the output directory are both reported so).
+TEST_F(InputsTest, RelativePathsNameTheWorkingDirectory)
+{
+    const fs::path w = work();
+    fs::create_directories(w / "elsewhere");
+    writeBytes(w / "r.json", R"({"field": {"path": "out/f.vdb"}, "output": {"path": "out/lic.vdb"}})");
+    RunResult r = runCommand("cd elsewhere && " + cli_test::licvdbCommand({"bake", "--recipe", "../r.json"}));
+    EXPECT_EQ(r.code, 2) << r.describe();
+    EXPECT_NE(r.err.find("field file \"out/f.vdb\" not found"), std::string::npos) << r.describe();
+    EXPECT_NE(r.err.find("working directory " + (w / "elsewhere").string()), std::string::npos) << r.describe();
+    goodVdb(w);
+    r = runCommand(cli_test::licvdbCommand({"bake", "--recipe", "r.json", "--field", "jet.vdb"}));
+    EXPECT_EQ(r.code, 2) << r.describe();
+    EXPECT_NE(r.err.find("output directory \"out\" does not exist"), std::string::npos) << r.describe();
+    EXPECT_NE(r.err.find("working directory " + w.string()), std::string::npos) << r.describe();
+}
+
+// A recipe named like its output (flow.json for flow.vdb) is fine: the manifest is
+// flow.licvdb.json (it was flow.json, and such bakes were refused), for a still and for a loop.
 TEST_F(InputsTest, RecipeNamedLikeTheOutputIsKept)
 {
     const fs::path w = work();
     const fs::path field = goodVdb(w);
-    writeBytes(w / "jet.json", R"({"lic": {"length": 4}})");
-    const std::string recipeBytes = readText(w / "jet.json");
+    writeBytes(w / "flow.json", R"({"lic": {"length": 4}})");
+    const std::string recipeBytes = readText(w / "flow.json");
     for (const auto& extra : {std::vector<std::string>{}, std::vector<std::string>{"--frames", "2"}}) {
-        std::vector<std::string> flags{"--recipe", (w / "jet.json").string()};
+        std::vector<std::string> flags{"--recipe", (w / "flow.json").string()};
         flags.insert(flags.end(), extra.begin(), extra.end());
-        const RunResult r = run(bakeArgs(field, w / "jet.vdb", flags));
+        const RunResult r = run(bakeArgs(field, w / "flow.vdb", flags));
         EXPECT_EQ(r.code, 0) << r.describe();
-        EXPECT_EQ(readText(w / "jet.json"), recipeBytes);
-        EXPECT_TRUE(fs::is_regular_file(w / "jet.licvdb.json")) << r.describe();
+        EXPECT_EQ(readText(w / "flow.json"), recipeBytes);
+        EXPECT_TRUE(fs::is_regular_file(w / "flow.licvdb.json")) << r.describe();
     }
 }
 
