@@ -68,12 +68,12 @@ set(CPACK_DEBIAN_PACKAGE_RELEASE 1)
 set(CPACK_DEBIAN_PACKAGE_MAINTAINER "${CPACK_PACKAGE_CONTACT}")
 set(CPACK_DEBIAN_RUNTIME_PACKAGE_NAME licvdb)
 set(CPACK_DEBIAN_RUNTIME_PACKAGE_SECTION graphics)
-set(CPACK_DEBIAN_RUNTIME_DESCRIPTION "3D line integral convolution baked into OpenVDB volumes
- licvdb turns a 3D vector field (CFD output, a Blender or Houdini smoke
- simulation, an analytic flow) into line integral convolution volumes written
- as OpenVDB grids: dense noise LIC or sparse streamlines with halos, width and
- colour by scalars, looping animations. It includes a reference halo raycaster
- (licvdb render) and the Blender add-on zips in /usr/share/licvdb/blender.")
+# The synopsis line is CPACK_PACKAGE_DESCRIPTION_SUMMARY; these are the bodies (CPack indents them).
+set(CPACK_DEBIAN_RUNTIME_DESCRIPTION "licvdb turns a 3D vector field (CFD output, a Blender or Houdini smoke
+simulation, an analytic flow) into line integral convolution volumes written
+as OpenVDB grids: dense noise LIC or sparse streamlines with halos, width and
+colour by scalars, looping animations. It includes a reference halo raycaster
+(licvdb render) and the Blender add-on zips in /usr/share/licvdb/blender.")
 # dpkg-shlibdeps finds every shared library the binary links, with versions (libopenvdb10.0,
 # libtbb12, libopenimageio2.4, libopencolorio2.1, libimath-3-1-29, libblosc1, libssl3, zlib1g,
 # libopenmpi3, libstdc++6, libc6: scripts/test-install checks them). licvdb runs nothing else
@@ -87,10 +87,9 @@ else()
 endif()
 set(CPACK_DEBIAN_DEVELOPMENT_PACKAGE_NAME licvdb-dev)
 set(CPACK_DEBIAN_DEVELOPMENT_PACKAGE_SECTION libdevel)
-set(CPACK_DEBIAN_DEVELOPMENT_DESCRIPTION "3D line integral convolution into OpenVDB (development files)
- Headers, static libraries and the CMake package of licvdb: find_package(licvdb)
- gives lic::lic (fields, streamlines, LIC engines, raycaster) and lic::vdbexport
- (recipes, readers, bakes to .vdb files).")
+set(CPACK_DEBIAN_DEVELOPMENT_DESCRIPTION "Development files of licvdb: headers, static libraries and the CMake
+package. find_package(licvdb) gives lic::lic (fields, streamlines, LIC engines,
+raycaster) and lic::vdbexport (recipes, readers, bakes to .vdb files).")
 # What licvdbConfig.cmake finds: the -dev packages of the public and the (static) private
 # dependencies. libopencv-dev: Debian's OpenImageIO CMake target names /usr/include/opencv4.
 set(_licvdb_dev_depends "licvdb (= ${PROJECT_VERSION}-1), libopenvdb-dev, libtbb-dev, libboost-iostreams-dev, libimath-dev, nlohmann-json3-dev, libopenimageio-dev, openimageio-tools, libopencv-dev, libopencolorio-dev, libssl-dev, zlib1g-dev, libblosc-dev")
