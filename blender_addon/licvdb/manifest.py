@@ -1,4 +1,4 @@
-"""Reading a bake's sidecar manifest (OUT.json) and finding the files of a bake.
+"""Reading a bake's sidecar manifest (OUT.licvdb.json) and finding the files of a bake.
 
 Pure Python (no ``bpy``), so it is usable and testable outside Blender. Blender's Python API
 cannot read VDB metadata, so everything the add-on needs about a bake comes from the manifest
@@ -18,6 +18,27 @@ from dataclasses import dataclass, field
 
 #: ``OUT_0001.vdb``: licvdb numbers the frames of a loop from 1 with four digits.
 _FRAME_RE = re.compile(r"^(?P<stem>.*?)_?(?P<num>\d+)\.vdb$", re.IGNORECASE)
+
+
+#: ``OUT.vdb`` → ``OUT.licvdb.json`` (licvdb's manifestPath). Older bakes wrote
+#: ``OUT.json``: still read, after the new name.
+MANIFEST_SUFFIX = ".licvdb.json"
+LEGACY_MANIFEST_SUFFIX = ".json"
+
+
+def manifest_path(vdb_path: str) -> str:
+    """The manifest licvdb writes for a bake to ``vdb_path`` (one for a whole loop)."""
+    root, ext = os.path.splitext(vdb_path)
+    return (root if ext.lower() == ".vdb" else vdb_path) + MANIFEST_SUFFIX
+
+
+def bake_name(manifest_file: str) -> str:
+    """The bake's name from its manifest: ``loop.licvdb.json`` (or an old ``loop.json``) → ``loop``."""
+    base = os.path.basename(manifest_file)
+    for suffix in (MANIFEST_SUFFIX, LEGACY_MANIFEST_SUFFIX):
+        if base.endswith(suffix):
+            return base[:-len(suffix)]
+    return os.path.splitext(base)[0]
 
 
 class ManifestError(Exception):
@@ -132,15 +153,16 @@ def frame_number(path: str) -> int | None:
 
 
 def manifest_candidates(vdb_path: str) -> list:
-    """Where the manifest of ``vdb_path`` may be: ``OUT.json`` beside ``OUT.vdb``; for a frame
-    ``OUT_0003.vdb`` of a loop first ``OUT_0003.json`` (a still whose name ends in digits, or one
-    frame of a per-frame bake), then ``OUT.json`` (the loop's manifest)."""
+    """Where the manifest of ``vdb_path`` may be: ``OUT.licvdb.json`` beside ``OUT.vdb``; for a
+    frame ``OUT_0003.vdb`` of a loop first ``OUT_0003.licvdb.json`` (a still whose name ends in
+    digits, or one frame of a per-frame bake), then ``OUT.licvdb.json`` (the loop's manifest).
+    Each is followed by its older name ``….json`` (bakes made before the rename)."""
     root, _ = os.path.splitext(vdb_path)
-    out = [root + ".json"]
+    roots = [root]
     m = re.match(r"^(.*?)_?\d+$", root)
     if m and m.group(1):
-        out.append(m.group(1) + ".json")
-    return out
+        roots.append(m.group(1))
+    return [r + suffix for r in roots for suffix in (MANIFEST_SUFFIX, LEGACY_MANIFEST_SUFFIX)]
 
 
 def find_manifest(vdb_path: str) -> Manifest | None:
@@ -148,7 +170,12 @@ def find_manifest(vdb_path: str) -> Manifest | None:
     target = os.path.abspath(vdb_path)
     for candidate in manifest_candidates(vdb_path):
         if os.path.isfile(candidate):
-            man = read_manifest(candidate)
+            try:
+                man = read_manifest(candidate)
+            except ManifestError:
+                if candidate.endswith(MANIFEST_SUFFIX):
+                    raise
+                continue  # OUT.json beside OUT.vdb may be a recipe, not an old manifest
             if any(os.path.abspath(f) == target for f in man.files):
                 return man
     return None

@@ -18,6 +18,7 @@ import traceback
 import bpy
 from mathutils import Matrix, Vector
 
+from . import manifest as mf
 from . import ops_import, prefs, props
 
 
@@ -248,7 +249,7 @@ class BakeJob:
         for _, out, summary in self.done_outputs:
             written = list(summary.get("files", [])) + [summary.get("manifest", "")]
             if not summary:  # no summary to go by: the still and its manifest
-                written = [out, os.path.splitext(out)[0] + ".json"]
+                written = [out, mf.manifest_path(out)]
             for p in written:
                 if p and os.path.isfile(p):
                     os.remove(p)
@@ -313,7 +314,7 @@ def plan_bake(context, obj):
         if len(outs) > 1:
             new = ops_import.import_bake(ctx, outs[0], files=outs, frame_start=frames[0], sequence_mode="CLIP",
                                          setup_render=True)
-        elif loop_frames > 1:  # licvdb wrote OUT_0001.vdb … and one manifest OUT.json
+        elif loop_frames > 1:  # licvdb wrote OUT_0001.vdb … and one manifest OUT.licvdb.json
             new = ops_import.import_bake(ctx, outs[0][:-len(".vdb")] + "_0001.vdb", setup_render=True)
         else:
             new = ops_import.import_bake(ctx, outs[0], setup_render=True)

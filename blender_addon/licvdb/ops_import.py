@@ -55,7 +55,7 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
     check.check_bake(context, files, man)  # before Blender's reader sees them (check.py)
     scene = context.scene
     first = files[0]
-    stem = os.path.splitext(os.path.basename(man.path if man else first))[0]
+    stem = mf.bake_name(man.path) if man else os.path.splitext(os.path.basename(first))[0]
     vol = bpy.data.volumes.new(name or stem)
     vol.filepath = first
     # Check the first file while the volume is still a single file (a sequence's original

@@ -42,7 +42,7 @@ def volumes():
 
 
 def write(directory, name="crossing"):
-    """Write NAME.vdb + NAME.json into ``directory``; returns the .vdb path."""
+    """Write NAME.vdb + NAME.licvdb.json into ``directory``; returns the .vdb path."""
     import pyopenvdb as vdb
 
     density, halo = volumes()
@@ -64,6 +64,6 @@ def write(directory, name="crossing"):
     manifest = {"licvdb_version": "test fixture", "recipe": {}, "frames": 1, "cyclic": False,
                 "files": [name + ".vdb"], "voxel_size": VOXEL, "colormap": None, "range": None,
                 "grids": infos}
-    with open(os.path.join(str(directory), name + ".json"), "w", encoding="utf-8") as f:
+    with open(os.path.join(str(directory), name + ".licvdb.json"), "w", encoding="utf-8") as f:
         json.dump(manifest, f, indent=2)
     return path

@@ -56,7 +56,10 @@ def test_sequence_and_manifest_helpers(tmp_path):
     files = mf.sequence_files(str(tmp_path / "x_0002.vdb"))
     assert [os.path.basename(f) for f in files] == ["x_0001.vdb", "x_0002.vdb", "x_0003.vdb"]
     assert mf.frame_number("loop_0012.vdb") == 12 and mf.frame_number("still.vdb") is None
-    assert mf.manifest_candidates("/a/loop_0003.vdb") == ["/a/loop_0003.json", "/a/loop.json"]
+    assert mf.manifest_candidates("/a/loop_0003.vdb") == ["/a/loop_0003.licvdb.json", "/a/loop_0003.json",
+                                                         "/a/loop.licvdb.json", "/a/loop.json"]
+    assert mf.manifest_path("/a/jet.vdb") == "/a/jet.licvdb.json"
+    assert mf.bake_name("/a/jet.licvdb.json") == "jet" and mf.bake_name("/a/jet.json") == "jet"
     with pytest.raises(mf.ManifestError, match="not a licvdb manifest"):
         mf.parse_manifest({"foo": 1}, "m.json")
 

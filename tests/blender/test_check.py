@@ -10,6 +10,7 @@ import bpy
 import pytest
 
 from licvdb import check, ops_import
+from licvdb import manifest as mf
 
 
 def lie_in_first_blosc_block(data: bytes) -> bytes:
@@ -48,13 +49,13 @@ def test_corrupt_vdb_is_refused_before_blender_reads_it(bakes, tmp_path):
 def test_vdb_that_its_manifest_does_not_describe_is_refused(bakes, tmp_path):
     # A bake's manifest beside another bake's .vdb (what two bakes to one output used to leave).
     # (Separate directories: replacing a file an open Blender has loaded is not supported.)
-    still_json = os.path.splitext(str(bakes["still"]))[0] + ".json"
+    still_json = mf.manifest_path(str(bakes["still"]))
     good, bad = tmp_path / "good", tmp_path / "bad"
     for d in (good, bad):
         d.mkdir()
-        shutil.copy(still_json, d / "still.json")
+        shutil.copy(still_json, d / "still.licvdb.json")
     shutil.copy(bakes["still"], good / "still.vdb")
-    man = json.loads((good / "still.json").read_text())
+    man = json.loads((good / "still.licvdb.json").read_text())
     assert man["sha256"]["still.vdb"] == check.sha256_of(str(good / "still.vdb"))
     assert ops_import.import_bake(bpy.context, str(good / "still.vdb")) is not None  # matching: imported
     shutil.copy(os.path.join(os.path.dirname(str(bakes["loop"])), "loop_0001.vdb"), bad / "still.vdb")

@@ -1,6 +1,7 @@
 """licvdb.import_bake: a still, a cyclic loop, the material, and placement in world space."""
 
 import os
+import shutil
 
 import bpy
 import pytest
@@ -47,7 +48,7 @@ def test_import_still(bakes):
     # A dense (noise) bake gets the dense look's brightness and absorption.
     assert (obj.licvdb.brightness, obj.licvdb.line_absorption) == pytest.approx(ops_import.DENSE_LOOK)
     assert obj.licvdb.look == "LINES"  # no halo grid
-    man = mf.read_manifest(os.path.splitext(str(bakes["still"]))[0] + ".json")
+    man = mf.read_manifest(mf.manifest_path(str(bakes["still"])))
     assert obj.licvdb.voxel_size == pytest.approx(man.voxel_size)
 
     mat = obj.active_material
@@ -110,6 +111,34 @@ def test_import_cyclic_loop(bakes):
     assert file_at(5 + 4 * 25 + 2) == (3, "loop_0003.vdb")  # and forever
 
 
+def test_bake_writes_licvdb_json_beside_its_recipe(bakes, tmp_path):
+    # `--recipe jet.json --out jet.vdb` used to be refused: the manifest was jet.json.
+    recipe = tmp_path / "jet.json"
+    recipe.write_text('{"lic": {"length": 6}}')
+    run_licvdb("bake", "--recipe", recipe, "--field", bakes["field"], "--out", tmp_path / "jet.vdb", "--quiet")
+    assert recipe.read_text() == '{"lic": {"length": 6}}'
+    assert (tmp_path / "jet.licvdb.json").is_file()
+    obj = import_one(tmp_path / "jet.vdb")  # the recipe jet.json beside it is not mistaken for a manifest
+    assert obj.licvdb.is_bake
+    assert os.path.samefile(obj.licvdb.manifest, tmp_path / "jet.licvdb.json")
+
+
+def test_import_bake_with_old_manifest_name(bakes, tmp_path):
+    """Bakes made before the rename have OUT.json (a still) or one OUT.json (a loop)."""
+    d = bakes["dir"]
+    for name in ("still.vdb", "loop_0001.vdb", "loop_0002.vdb", "loop_0003.vdb", "loop_0004.vdb"):
+        shutil.copy(d / name, tmp_path / name)
+    shutil.copy(mf.manifest_path(str(d / "still.vdb")), tmp_path / "still.json")
+    shutil.copy(mf.manifest_path(str(d / "loop.vdb")), tmp_path / "loop.json")
+    still = import_one(tmp_path / "still.vdb")
+    assert still.licvdb.is_bake and still.licvdb.colormap_name == "viridis"
+    assert os.path.samefile(still.licvdb.manifest, tmp_path / "still.json")
+    loop = import_one(tmp_path / "loop_0002.vdb")
+    assert loop.data.is_sequence and loop.data.frame_duration == 4
+    assert loop.licvdb.cyclic and loop.licvdb.frames == 4
+    assert os.path.samefile(loop.licvdb.manifest, tmp_path / "loop.json")
+
+
 def test_import_multiselect_dedupes_loop(bakes):
     d = str(bakes["dir"])
     files = [{"name": f"loop_000{i}.vdb"} for i in (1, 2, 3, 4)] + [{"name": "still.vdb"}]
@@ -154,7 +183,7 @@ def test_placement_matches_field_bbox(bakes):
     assert obj.licvdb.half_voxel_shift == (bpy.app.build_hash in (b"Unknown", b"unknown", b""))
     rendered_lo = [v - half + shift for v in lo]
     rendered_hi = [v + half + shift for v in hi]
-    man = mf.read_manifest(str(bakes["still"]).replace(".vdb", ".json"))
+    man = mf.read_manifest(mf.manifest_path(str(bakes["still"])))
     mlo, mhi = man.grid("density").world_bbox
     for a in range(3):
         assert rendered_lo[a] == pytest.approx(mlo[a], abs=1e-3 * half), (a, rendered_lo, mlo)

@@ -257,10 +257,10 @@ const std::vector<BadCase>& cases()
          {"overwrite", "input field", "--out"}},
         {"the manifest would replace the recipe",
          [](const fs::path& w) {
-             writeBytes(w / "r.json", R"({"lic": {"length": 4}})");
-             return InputsTest::bakeArgs(goodNpy(w), w / "r.vdb", {"--recipe", (w / "r.json").string()});
+             writeBytes(w / "r.licvdb.json", R"({"lic": {"length": 4}})");
+             return InputsTest::bakeArgs(goodNpy(w), w / "r.vdb", {"--recipe", (w / "r.licvdb.json").string()});
          },
-         {"overwrite", "recipe", "r.json"}},
+         {"overwrite", "recipe", "r.licvdb.json"}},
     };
     return all;
 }
@@ -303,19 +303,56 @@ TEST_F(InputsTest, BakeDoesNotOverwriteItsInputs)
 {
     const fs::path w = work();
     const fs::path field = goodVdb(w);
-    writeBytes(w / "r.json", R"({"lic": {"length": 4}})");
-    const std::string fieldBytes = readText(field), recipeBytes = readText(w / "r.json");
-    for (const auto& args : {bakeArgs(field, field), bakeArgs(field, w / "r.vdb", {"--recipe", (w / "r.json").string()}),
-                             bakeArgs(field, w / "./r.vdb", {"--recipe", (w / "r.json").string(), "--frames", "2"})}) {
+    const fs::path recipe = w / "r.licvdb.json"; // the manifest name of r.vdb
+    writeBytes(recipe, R"({"lic": {"length": 4}})");
+    const std::string fieldBytes = readText(field), recipeBytes = readText(recipe);
+    for (const auto& args : {bakeArgs(field, field), bakeArgs(field, w / "r.vdb", {"--recipe", recipe.string()}),
+                             bakeArgs(field, w / "./r.vdb", {"--recipe", recipe.string(), "--frames", "2"})}) {
         const RunResult r = run(args);
         EXPECT_EQ(r.code, 2) << r.describe();
         EXPECT_EQ(readText(field), fieldBytes);
-        EXPECT_EQ(readText(w / "r.json"), recipeBytes);
+        EXPECT_EQ(readText(recipe), recipeBytes);
     }
     // A different output name is fine.
-    const RunResult ok = run(bakeArgs(field, w / "lic.vdb", {"--recipe", (w / "r.json").string()}));
+    const RunResult ok = run(bakeArgs(field, w / "lic.vdb", {"--recipe", recipe.string()}));
     EXPECT_EQ(ok.code, 0) << ok.describe();
-    EXPECT_EQ(readText(w / "r.json"), recipeBytes);
+    EXPECT_EQ(readText(recipe), recipeBytes);
+}
+
+// A recipe run from another directory: its relative paths are taken from the working directory,
+// and the message says which one (the field and the output directory are both reported so).
+TEST_F(InputsTest, RelativePathsNameTheWorkingDirectory)
+{
+    const fs::path w = work();
+    fs::create_directories(w / "elsewhere");
+    writeBytes(w / "r.json", R"({"field": {"path": "out/f.vdb"}, "output": {"path": "out/lic.vdb"}})");
+    RunResult r = runCommand("cd elsewhere && " + cli_test::licvdbCommand({"bake", "--recipe", "../r.json"}));
+    EXPECT_EQ(r.code, 2) << r.describe();
+    EXPECT_NE(r.err.find("field file \"out/f.vdb\" not found"), std::string::npos) << r.describe();
+    EXPECT_NE(r.err.find("working directory " + (w / "elsewhere").string()), std::string::npos) << r.describe();
+    goodVdb(w);
+    r = runCommand(cli_test::licvdbCommand({"bake", "--recipe", "r.json", "--field", "jet.vdb"}));
+    EXPECT_EQ(r.code, 2) << r.describe();
+    EXPECT_NE(r.err.find("output directory \"out\" does not exist"), std::string::npos) << r.describe();
+    EXPECT_NE(r.err.find("working directory " + w.string()), std::string::npos) << r.describe();
+}
+
+// A recipe named like its output (flow.json for flow.vdb) is fine: the manifest is
+// flow.licvdb.json (it was flow.json, and such bakes were refused), for a still and for a loop.
+TEST_F(InputsTest, RecipeNamedLikeTheOutputIsKept)
+{
+    const fs::path w = work();
+    const fs::path field = goodVdb(w);
+    writeBytes(w / "flow.json", R"({"lic": {"length": 4}})");
+    const std::string recipeBytes = readText(w / "flow.json");
+    for (const auto& extra : {std::vector<std::string>{}, std::vector<std::string>{"--frames", "2"}}) {
+        std::vector<std::string> flags{"--recipe", (w / "flow.json").string()};
+        flags.insert(flags.end(), extra.begin(), extra.end());
+        const RunResult r = run(bakeArgs(field, w / "flow.vdb", flags));
+        EXPECT_EQ(r.code, 0) << r.describe();
+        EXPECT_EQ(readText(w / "flow.json"), recipeBytes);
+        EXPECT_TRUE(fs::is_regular_file(w / "flow.licvdb.json")) << r.describe();
+    }
 }
 
 TEST(BadInputSuite, CoversAtLeastTwentyCases) { EXPECT_GE(cases().size(), 20u); }

@@ -243,7 +243,7 @@ TEST_F(CliTest, FieldBakeHappyPath)
     expectBBoxNear(bboxFromJson(dd->at("world_bbox")), fieldBox, 1e-6, "describeVdb world_bbox");
 
     // Sidecar manifest.
-    const fs::path manifestPath = work("abc_lic.json");
+    const fs::path manifestPath = work("abc_lic.licvdb.json");
     ASSERT_TRUE(fs::is_regular_file(manifestPath)) << "no sidecar manifest " << manifestPath;
     const json manifest = json::parse(readText(manifestPath));
     ASSERT_TRUE(manifest.contains("grids")) << manifest.dump(2);
@@ -257,7 +257,7 @@ TEST_F(CliTest, FieldBakeHappyPath)
 
     // No temporary files left behind.
     for (const auto& f : workFiles()) EXPECT_EQ(f.find(".tmp-"), std::string::npos) << "left over: " << f;
-    EXPECT_EQ(workFiles(), (std::set<std::string>{"abc.vdb", "abc_lic.vdb", "abc_lic.json"}));
+    EXPECT_EQ(workFiles(), (std::set<std::string>{"abc.vdb", "abc_lic.vdb", "abc_lic.licvdb.json"}));
 }
 
 // ---- 2. --json and --quiet -------------------------------------------------------------------
@@ -381,7 +381,7 @@ TEST_F(CliTest, ColourByFileScalarWritesColorScalarAndRamp)
     // Metadata and manifest carry the ramp for renderers.
     EXPECT_EQ(density->metaValue<std::string>("lic_colormap"), "red-yellow");
     EXPECT_EQ(density->metaValue<std::string>("lic_color_scalar"), "temperature");
-    const json m = json::parse(readText(work("lic.json")));
+    const json m = json::parse(readText(work("lic.licvdb.json")));
     EXPECT_EQ(m["colormap"]["name"], "red-yellow");
     EXPECT_EQ(m["colormap"]["range"][0], 300.0);
     EXPECT_EQ(m["colormap"]["range"][1], 360.0);
@@ -461,7 +461,7 @@ TEST_F(CliTest, SpotFlagsMapOntoTheRecipeAndWriteHaloAndSeries)
     EXPECT_EQ(recipe["roi"]["mode"], "post");
     EXPECT_EQ(recipe["roi"]["range"], json::array({0.1, 5.0}));
     EXPECT_EQ(recipe["output"]["write_series"], true);
-    const json manifest = json::parse(readText(work("spots.json")));
+    const json manifest = json::parse(readText(work("spots.licvdb.json")));
     EXPECT_EQ(manifest["input"], "spots");
     EXPECT_EQ(manifest["spots"]["count"].get<openvdb::Int64>(), density->metaValue<openvdb::Int64>("lic_spot_count"));
 
@@ -525,7 +525,7 @@ TEST_F(CliTest, HalfStorageHalvesTheFileAndReadsBackAsFloat)
             worst = std::max(worst, double((*it - vb->tree().getValue(it.getCoord())).length()));
         EXPECT_LE(worst, 2e-3) << name;
     }
-    const json recipe = json::parse(readText(work("half.json")))["recipe"];
+    const json recipe = json::parse(readText(work("half.licvdb.json")))["recipe"];
     EXPECT_EQ(recipe["output"]["half"], true);
     const RunResult info = run({"info", half.string()});
     EXPECT_EQ(info.code, 0) << info.describe();
@@ -557,7 +557,7 @@ TEST_F(CliTest, CyclicSequence)
         frames.push_back(d);
     }
     EXPECT_FALSE(fs::exists(out)) << "a loop writes numbered files only";
-    const json m = json::parse(readText(work("loop.json")));
+    const json m = json::parse(readText(work("loop.licvdb.json")));
     EXPECT_EQ(m["frames"], 4);
     EXPECT_EQ(m["cyclic"], true);
     ASSERT_EQ(m["files"].size(), 4u);
@@ -879,7 +879,7 @@ TEST_P(CliBadInputTest, ExitsTwoNamesProblemWritesNothing)
         if (!before.count(e.path().string())) created.push_back(e.path().string());
     EXPECT_TRUE(created.empty()) << "created: " << (created.empty() ? "" : created.front()) << "\n" << r.describe();
     EXPECT_FALSE(fs::exists(w / "out.vdb"));
-    EXPECT_FALSE(fs::exists(w / "out.json"));
+    EXPECT_FALSE(fs::exists(w / "out.licvdb.json"));
     if (std::getenv("LICVDB_TEST_SHOW_ERRORS")) std::cout << c.name << ":\n" << r.err;
 }
 

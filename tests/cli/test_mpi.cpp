@@ -217,8 +217,8 @@ TEST_F(MpiBake, NoiseIsBitIdenticalToOneProcessForOneToFourRanks)
         const json s = json::parse(r.out); // one summary: rank 0 alone prints
         expectSameFiles(mOut / "one.vdb", mOut / name, name);
         EXPECT_EQ(counters(s), counters(s1)) << name;
-        EXPECT_EQ(manifestCore(mOut / ("np" + std::to_string(ranks) + "_t" + std::to_string(threads) + ".json")),
-                  manifestCore(mOut / "one.json"))
+        EXPECT_EQ(manifestCore(mOut / ("np" + std::to_string(ranks) + "_t" + std::to_string(threads) + ".licvdb.json")),
+                  manifestCore(mOut / "one.licvdb.json"))
             << name;
         if (ranks > 1) {
             ASSERT_EQ(s["ranks"].size(), std::size_t(ranks)) << r.out;
@@ -284,7 +284,7 @@ TEST_F(MpiBake, AFourFrameLoopIsBitIdenticalInEveryFrame)
     ASSERT_NO_FATAL_FAILURE(bakeOneAndThree(args, r1, r3));
     EXPECT_EQ(counters(json::parse(r3.out)), counters(json::parse(r1.out)));
     expectSameFrames(mOut, "one", "three", 4, "noise loop");
-    EXPECT_EQ(manifestCore(mOut / "three.json"), manifestCore(mOut / "one.json"));
+    EXPECT_EQ(manifestCore(mOut / "three.licvdb.json"), manifestCore(mOut / "one.licvdb.json"));
 }
 
 TEST_F(MpiBake, SpotsWithHalosWidthsAndColourAreBitIdentical)
@@ -298,7 +298,7 @@ TEST_F(MpiBake, SpotsWithHalosWidthsAndColourAreBitIdentical)
     expectSameFiles(mOut / "one.vdb", mOut / "three.vdb", "spots");
     EXPECT_EQ(counters(json::parse(r3.out)), counters(json::parse(r1.out)));
     EXPECT_GT(json::parse(r1.out)["spots"]["count"].get<int>(), 100);
-    EXPECT_EQ(manifestCore(mOut / "three.json"), manifestCore(mOut / "one.json"));
+    EXPECT_EQ(manifestCore(mOut / "three.licvdb.json"), manifestCore(mOut / "one.licvdb.json"));
     // A spot loop too: every frame of line and halo.
     auto loop = args;
     loop.insert(loop.end(), {"--frames", "3"});

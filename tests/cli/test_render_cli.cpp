@@ -167,12 +167,20 @@ TEST_F(RenderCli, SequencesManifestsAndGif)
     RunResult r = run({"render", shared("loop_0001.vdb"), "--frames", "2", "--out", "seq.png", "--size", "16,12", "--gif"});
     ASSERT_EQ(r.code, 0) << r.describe();
     EXPECT_EQ(files(), (std::set<std::string>{"seq_0001.png", "seq_0002.png", "seq.gif"}));
-    r = run({"render", shared("loop.json"), "--out", "m.exr", "--size", "16,12", "--json"});
+    r = run({"render", shared("loop.licvdb.json"), "--out", "m.exr", "--size", "16,12", "--json"});
     ASSERT_EQ(r.code, 0) << r.describe();
     const json j = json::parse(r.out);
     EXPECT_EQ(j["frames"], 2);
     EXPECT_TRUE(fs::exists(out("m_0001.exr")));
     EXPECT_TRUE(fs::exists(out("m_0002.exr")));
+    // A manifest under its old name (OUT.json, bakes made before the rename) reads the same.
+    fs::copy_file(shared("loop.licvdb.json"), out("old.json"));
+    fs::copy_file(shared("loop_0001.vdb"), out("loop_0001.vdb"));
+    fs::copy_file(shared("loop_0002.vdb"), out("loop_0002.vdb"));
+    r = run({"render", out("old.json").string(), "--out", "o.exr", "--size", "16,12", "--json"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    EXPECT_EQ(json::parse(r.out)["frames"], 2);
+    EXPECT_EQ(vdbexport::readImage(out("o_0002.exr").string()).rgba, vdbexport::readImage(out("m_0002.exr").string()).rgba);
     // The two frames of a loop differ.
     EXPECT_NE(vdbexport::readImage(out("m_0001.exr").string()).rgba, vdbexport::readImage(out("m_0002.exr").string()).rgba);
     // A missing frame is an input error and writes nothing.

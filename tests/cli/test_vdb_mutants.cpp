@@ -139,7 +139,7 @@ TEST_F(VdbMutantsTest, MutantsExitZeroOrTwoNeverCrashNeverHang)
                         ++bakes;
                         const auto left = listing(outDir);
                         if (r.code == 2) EXPECT_TRUE(left.empty()) << "a refused bake left " << *left.begin();
-                        else EXPECT_EQ(left, (std::set<std::string>{"lic.json", "lic.vdb"}));
+                        else EXPECT_EQ(left, (std::set<std::string>{"lic.licvdb.json", "lic.vdb"}));
                         for (const auto& e : left) fs::remove(outDir / e);
                     }
                 }
@@ -165,7 +165,7 @@ TEST_F(VdbMutantsTest, ConcurrentBakesLeaveAManifestThatMatchesTheVdb)
             cmd += cli_test::licvdbCommand(bakeArgs(field, out, {"--quiet", "--seed", std::to_string(seed + 10 * round)})) + " & ";
         const RunResult r = runCommand("( " + cmd + "wait )");
         ASSERT_EQ(r.code, 0) << r.describe();
-        const auto manifest = nlohmann::json::parse(readText(w / "same.json"));
+        const auto manifest = nlohmann::json::parse(readText(w / "same.licvdb.json"));
         EXPECT_EQ(manifest["recipe"]["input"]["seed"].get<int64_t>(), recipeSeedInFile(out)) << "round " << round;
         EXPECT_EQ(manifest["sha256"]["same.vdb"].get<std::string>(), vdbexport::sha256OfFile(out.string()));
         for (const auto& name : listing(w)) EXPECT_EQ(name.find(".tmp-"), std::string::npos) << name;
@@ -192,8 +192,8 @@ TEST_F(VdbMutantsTest, KilledBakeLeavesNoFile)
             ++killed;
         } else {
             ++finished;
-            ASSERT_EQ(left, (std::set<std::string>{"k.json", "k_0001.vdb", "k_0002.vdb", "k_0003.vdb"})) << r.describe();
-            const auto manifest = nlohmann::json::parse(readText(outDir / "k.json"));
+            ASSERT_EQ(left, (std::set<std::string>{"k.licvdb.json", "k_0001.vdb", "k_0002.vdb", "k_0003.vdb"})) << r.describe();
+            const auto manifest = nlohmann::json::parse(readText(outDir / "k.licvdb.json"));
             for (const char* f : {"k_0001.vdb", "k_0002.vdb", "k_0003.vdb"})
                 EXPECT_EQ(manifest["sha256"][f].get<std::string>(), vdbexport::sha256OfFile((outDir / f).string()));
         }

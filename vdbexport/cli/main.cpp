@@ -194,7 +194,7 @@ int main(int argc, char** argv)
     CLI::App* bake = app.add_subcommand("bake", "Bake a LIC volume from a vector field");
     bake->add_option("-f,--field", cli.field.path, "Field: .vdb (a Vec3 grid, or vel.x/.y/.z), .npy, .vti, .vtk or raw (with --shape)");
     bake->add_option("--grid", cli.field.grid, "Vector grid name (default: velocity, vel, v, the only Vec3 grid)");
-    bake->add_option("-o,--out", cli.output.path, "Output .vdb (a sidecar OUT.json manifest is written too)");
+    bake->add_option("-o,--out", cli.output.path, "Output .vdb (a sidecar manifest OUT.licvdb.json is written too)");
     bake->add_option("-r,--recipe", recipePath, "JSON recipe; flags override its values");
     auto* oInput = bake->add_option("--input", cli.input.type, "Input texture: noise|spots [noise]");
     auto* oFilter = bake->add_option("--noise-filter", cli.input.noiseFilter, "Noise reconstruction: binomial|none [binomial]");
@@ -293,7 +293,7 @@ int main(int argc, char** argv)
     vdbexport::RenderFlagStrings rflags;
     double rAzimuth = 0, rElevation = 0, rDistance = 0, rEyeSep = 0;
     CLI::App* render = app.add_subcommand("render", "Raycast a baked .vdb to an image (reference halo renderer)");
-    render->add_option("input", rjob.input, "Baked .vdb (a `density` grid), first frame OUT_0001.vdb, or a bake's OUT.json")->required();
+    render->add_option("input", rjob.input, "Baked .vdb (a `density` grid), first frame OUT_0001.vdb, or a bake's manifest OUT.licvdb.json")->required();
     render->add_option("-o,--out", rjob.output, "Image: .png/.jpg/.tif (display, via OCIO), .exr (scene-linear), .gif")->required();
     render->add_option("--size", rflags.size, "Image size W,H in pixels [1024,1024]");
     render->add_option("--view", rflags.view, "front|back|left|right|top|bottom (Blender's, Z up) [front]");

@@ -45,9 +45,12 @@ std::string framePath(const std::string& vdbPath, int frame, int frames)
 
 std::string manifestPath(const std::string& vdbPath)
 {
+    // Not OUT.json: that is what a recipe for OUT.vdb is naturally called (`--recipe jet.json
+    // --out jet.vdb`), and the bake would refuse to overwrite it. The add-on still reads OUT.json
+    // beside bakes made before the rename (blender_addon/licvdb/manifest.py).
     fs::path p(vdbPath);
-    if (p.extension() == ".vdb") p.replace_extension(".json");
-    else p += ".json";
+    if (p.extension() == ".vdb") p.replace_extension();
+    p += manifestSuffix;
     return p.string();
 }
 

@@ -148,7 +148,7 @@ std::vector<std::string> renderInputs(const std::string& input, int frames)
     std::error_code ec;
     if (fs::path(input).extension() == ".json") {
         if (!fs::is_regular_file(input, ec))
-            throw lic::InputError("manifest " + quote(input) + " does not exist; expected a bake's OUT.json or a .vdb");
+            throw lic::InputError("manifest " + quote(input) + " does not exist; expected a bake's manifest OUT.licvdb.json (or an older OUT.json) or a .vdb");
         nlohmann::json m;
         try {
             std::ifstream in(input);

@@ -15,7 +15,12 @@ namespace vdbexport {
 /// OUT_0001.vdb … for a loop (1-based, 4 digits).
 std::string framePath(const std::string& vdbPath, int frame, int frames);
 
-/// The sidecar manifest path of a bake: OUT.vdb → OUT.json (one for a whole loop).
+/// The ending of a bake's sidecar manifest: OUT.vdb → OUT.licvdb.json (older bakes: OUT.json).
+inline constexpr const char* manifestSuffix = ".licvdb.json";
+
+/// The sidecar manifest path of a bake: OUT.vdb → OUT.licvdb.json, one for a whole sequence
+/// (OUT_0001.vdb … share OUT.licvdb.json); a path not ending in .vdb gets the suffix appended.
+/// Every place that names a bake's manifest goes through here.
 std::string manifestPath(const std::string& vdbPath);
 
 /// @throw lic::InputError if a file the bake would write (a frame or the manifest) is the file

@@ -43,13 +43,24 @@ void checkSupported(const Recipe& r)
     }
 }
 
+/// For a relative path, where it was looked for: a recipe's paths are relative to the working
+/// directory, not to the recipe, which is easy to forget when running one from elsewhere.
+std::string relativeToCwd(const fs::path& p)
+{
+    std::error_code ec;
+    const fs::path cwd = fs::current_path(ec);
+    if (p.is_absolute() || ec) return "";
+    return "; relative paths (also a recipe's) are taken from the working directory " + cwd.string();
+}
+
 void checkOutputDirectory(const std::string& out)
 {
     fs::path dir = fs::path(out).parent_path();
     if (dir.empty()) dir = ".";
     std::error_code ec;
     if (!fs::is_directory(dir, ec)) {
-        throw lic::InputError("output directory \"" + dir.string() + "\" does not exist (for --out " + out + ")");
+        throw lic::InputError("output directory \"" + dir.string() + "\" does not exist (for --out " + out + ")" +
+                              relativeToCwd(dir));
     }
     if (fs::is_directory(out, ec)) {
         throw lic::InputError("output path \"" + out + "\" is a directory; expected a .vdb file name");
@@ -63,6 +74,13 @@ Plan makePlan(const Recipe& recipe)
     recipe.validate();
     recipe.validatePaths();
     checkSupported(recipe);
+    // A missing relative field path says where it was looked for (the readers report the rest;
+    // a '#' frame pattern is expanded by the sequence reader).
+    std::error_code ec;
+    if (recipe.field.path.find('#') == std::string::npos && !fs::exists(recipe.field.path, ec) &&
+        !relativeToCwd(recipe.field.path).empty()) {
+        throw lic::InputError("field file \"" + recipe.field.path + "\" not found" + relativeToCwd(recipe.field.path));
+    }
     checkOutputDirectory(recipe.output.path);
     checkNotOverwritten(recipe, recipe.field.path, "the input field");
 
