@@ -326,7 +326,9 @@ TEST(ScalarSet, AbsSuffixIsTheMagnitudeOfAnyScalar)
             negatives += s < 0.0f;
             ASSERT_EQ(*it, std::abs(s)) << base << " at " << it.getCoord();
         }
-        if (base == "streamwise-vorticity") EXPECT_GT(negatives, 100u);
+        if (base == "streamwise-vorticity") {
+            EXPECT_GT(negatives, 100u);
+        }
     }
     EXPECT_THROW(set.get("no-such-grid-abs"), lic::InputError);
 }

@@ -376,14 +376,12 @@ int main(int argc, char** argv)
             const openvdb::Coord r = res.empty() ? lic::presetDefaultResolution(preset) : parseRes(res);
             std::vector<int> numbers{0};
             if (!fieldFrames.empty()) {
-                const auto v = vdbexport::parseNumberList("--frames", fieldFrames, "FIRST,LAST", 2);
-                if (v[0] != std::floor(v[0]) || v[1] != std::floor(v[1]) || v[0] < 0 || v[1] < v[0] || v[1] - v[0] >= 100000)
-                    throw lic::InputError("--frames " + fieldFrames + ": expected FIRST,LAST whole numbers, 0 <= FIRST <= LAST");
+                const auto [firstFrame, lastFrame] = vdbexport::parseFrameRange("--frames", fieldFrames);
                 if (!(fieldFps > 0) || !std::isfinite(fieldFps)) throw lic::InputError("--fps must be > 0");
                 if (!vdbexport::isFramePattern(fieldOut))
                     throw lic::InputError("--out \"" + fieldOut + "\": with --frames, put #### where the frame number goes");
                 numbers.clear();
-                for (int n = int(v[0]); n <= int(v[1]); ++n) numbers.push_back(n);
+                for (int n = firstFrame; n <= lastFrame; ++n) numbers.push_back(n);
             }
             vdbexport::OutputSet outputs; // all frames appear together, or none
             openvdb::GridPtrVec grids;
@@ -484,10 +482,7 @@ int main(int argc, char** argv)
             if (oContrast->count()) r.output.contrast = cli.output.contrast;
             if (oFrames->count()) r.animation.frames = cli.animation.frames;
             if (oFieldFrames->count()) {
-                const auto v = vdbexport::parseNumberList("--field-frames", fieldFramesRange, "FIRST,LAST", 2);
-                if (v[0] != std::floor(v[0]) || v[1] != std::floor(v[1]) || std::abs(v[0]) > 1e9 || std::abs(v[1]) > 1e9)
-                    throw lic::InputError("--field-frames " + fieldFramesRange + ": expected FIRST,LAST whole frame numbers");
-                r.field.frames = std::array<int, 2>{int(v[0]), int(v[1])};
+                r.field.frames = vdbexport::parseFrameRange("--field-frames", fieldFramesRange);
                 if (!vdbexport::isFramePattern(r.field.path)) {
                     throw lic::InputError("--field \"" + r.field.path + "\" has no frame number: with --field-frames, put a run "
                                           "of # (or %04d) where it goes, e.g. cache/data/fluid_data_####.vdb");

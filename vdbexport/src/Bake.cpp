@@ -137,17 +137,6 @@ openvdb::BBoxd bricksBox(const lic::BrickLayout& layout, const std::vector<std::
 
 } // namespace
 
-namespace pipeline {
-lic::Colormap loadColormap(const std::string& spec)
-{
-    if (fs::path(spec).extension() != ".csv") return lic::Colormap::named(spec);
-    std::ifstream in(spec);
-    if (!in) throw lic::InputError("colormap LUT file \"" + spec + "\" cannot be read");
-    std::stringstream text;
-    text << in.rdbuf();
-    return lic::Colormap::fromCsv(text.str(), spec);
-}
-} // namespace pipeline
 
 // The pipeline of DESIGN.md, top to bottom; each stage lives in src/bake/. In a distributed bake
 // (mpirun) every rank runs it on its share of the bricks and rank 0 writes (bake/Distribute.h);
@@ -203,19 +192,7 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     const std::vector<std::uint32_t>* blocks = job.distributed() ? &mineBlocks : nullptr;
     pipeline::HistogramReduce reduce;
     if (job.distributed()) reduce = [&](std::vector<std::uint64_t>& h) { job.sumAll(h, "computing scalar ranges"); };
-    job.stage("computing scalar ranges", [&] {
-        if (recipe.width) {
-            ranges.width = recipe.width->range
-                               ? *recipe.width->range
-                               : pipeline::autoRange(pipeline::ScalarField(scalars.get(recipe.width->scalar)), domain, recipe.threads, blocks, reduce);
-        }
-        if (recipe.color) {
-            cmap = pipeline::loadColormap(recipe.color->colormap);
-            ranges.color = recipe.color->range
-                               ? *recipe.color->range
-                               : pipeline::autoRange(pipeline::ScalarField(scalars.get(recipe.color->scalar)), domain, recipe.threads, blocks, reduce);
-        }
-    });
+    job.stage("computing scalar ranges", [&] { ranges = pipeline::bakeRanges(recipe, scalars, domain, cmap, blocks, reduce); });
 
     // 4. Input texture: spots placed once (a rank keeps those near its bricks); noise made per brick.
     pipeline::Input input = job.stage("making the input texture", [&] {
@@ -268,7 +245,8 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     double tGather = 0.0;
     if (!job.distributed()) {
         written = pipeline::writeFrames(plan, *compositor, densityMeta, progress);
-        pipeline::writeManifest(plan, written, domain.voxelSize(), resolved, colorJson, spotsJson);
+        pipeline::writeManifest(recipe, resolved, written.paths, *written.output, pipeline::gridsJson(written.firstGrids),
+                                    domain.voxelSize(), colorJson, spotsJson);
     } else {
         // Each rank composes its leaves of every frame; rank 0 adds the others' and writes. The
         // static grids (input, tangent, colour) travel with frame 1 only.
@@ -298,7 +276,8 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
                     gather(f, grids);
                     job.injectFault(("writing frame " + std::to_string(f)).c_str());
                 });
-                pipeline::writeManifest(plan, written, domain.voxelSize(), resolved, colorJson, spotsJson);
+                pipeline::writeManifest(recipe, resolved, written.paths, *written.output, pipeline::gridsJson(written.firstGrids),
+                                    domain.voxelSize(), colorJson, spotsJson);
                 guard.disarm();
             } catch (...) {
                 if (job.failed()) throw;

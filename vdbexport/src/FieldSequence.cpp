@@ -116,8 +116,7 @@ FieldFrames resolveFieldFrames(const FieldSpec& field)
         if (digits.empty() || digits.size() > 9 || !std::all_of(digits.begin(), digits.end(), ::isdigit)) continue;
         if (ph.width > 0 && int(digits.size()) < ph.width) continue;
         const int f = std::stoi(digits);
-        if (expandFramePattern(field.path, f) == (dir / n).string() || (dir.empty() && expandFramePattern(field.path, f) == n))
-            found.insert(f);
+        if (expandFramePattern(field.path, f) == (dir / n).string()) found.insert(f);
     }
     if (found.empty()) {
         throw lic::InputError("field sequence \"" + field.path + "\": no frames found" +

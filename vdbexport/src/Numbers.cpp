@@ -31,4 +31,12 @@ std::vector<double> parseNumberList(const std::string& flag, const std::string& 
     return v;
 }
 
+std::array<int, 2> parseFrameRange(const std::string& flag, const std::string& text)
+{
+    const auto v = parseNumberList(flag, text, "FIRST,LAST", 2);
+    if (v[0] != std::floor(v[0]) || v[1] != std::floor(v[1]) || v[0] < 0 || v[1] < v[0] || v[1] - v[0] >= 100000)
+        throw lic::InputError(flag + " " + text + ": expected FIRST,LAST whole frame numbers, 0 <= FIRST <= LAST, at most 100000 frames");
+    return {int(v[0]), int(v[1])};
+}
+
 } // namespace vdbexport

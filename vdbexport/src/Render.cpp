@@ -13,6 +13,8 @@
 #include <filesystem>
 #include <fstream>
 #include <regex>
+#include <tuple>
+#include <optional>
 #include <sstream>
 
 namespace vdbexport {
@@ -141,6 +143,17 @@ std::string imageFramePath(const std::string& imagePath, int frame, int frames)
     return (p.parent_path() / (p.stem().string() + suffix + p.extension().string())).string();
 }
 
+namespace {
+/// The frame number a file name ends in (stem `OUT_0012` → OUT, 12), if it has one (4–9 digits).
+std::optional<std::pair<std::string, int>> numberedStem(const std::string& stem)
+{
+    static const std::regex numbered("(.*)_([0-9]{4,9})");
+    std::smatch m;
+    if (!std::regex_match(stem, m, numbered)) return std::nullopt;
+    return std::pair{m[1].str(), std::stoi(m[2].str())};
+}
+} // namespace
+
 std::vector<std::string> renderInputs(const std::string& input, int frames)
 {
     if (frames < 0 || frames > 100000)
@@ -174,13 +187,8 @@ std::vector<std::string> renderInputs(const std::string& input, int frames)
     // A sequence: IN may be OUT_0001.vdb (its first frame) or OUT.vdb.
     const fs::path p(input);
     std::string stem = p.stem().string();
-    static const std::regex numbered("(.*)_([0-9]{4,9})");
-    std::smatch m;
     int first = 1; // an unsteady sequence starts at its field's first frame: IN = OUT_0010.vdb
-    if (std::regex_match(stem, m, numbered)) {
-        stem = m[1].str();
-        first = std::stoi(m[2].str());
-    }
+    if (const auto n = numberedStem(stem)) std::tie(stem, first) = *n;
     std::vector<std::string> files;
     for (int f = first; f < first + frames; ++f) {
         char suffix[16];
@@ -348,14 +356,8 @@ nlohmann::json render(const RenderJob& job, lic::Progress& progress)
                 gifFrames.push_back(std::move(img));
             } else {
                 // Images are numbered as their files (an unsteady sequence's field frames).
-                int number = f;
-                {
-                    static const std::regex numbered(".*_([0-9]{4,9})");
-                    std::smatch nm;
-                    const std::string stem = fs::path(inputs[std::size_t(f - 1)]).stem().string();
-                    if (std::regex_match(stem, nm, numbered)) number = std::stoi(nm[1].str());
-                }
-                const std::string path = imageFramePath(job.output, number, frames);
+                const auto n = numberedStem(fs::path(inputs[std::size_t(f - 1)]).stem().string());
+                const std::string path = imageFramePath(job.output, n ? n->second : f, frames);
                 writeImageAtomic(path, img, display,
                                  {{"Software", std::string("licvdb ") + LICVDB_VERSION},
                                   {"ImageDescription", "licvdb render of " + inputs[std::size_t(f - 1)]}});

@@ -10,6 +10,9 @@
 #include "lic/Error.h"
 
 #include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <cmath>
 #include <cstring>
 
@@ -382,6 +385,33 @@ openvdb::GridPtrVec Compositor::frame(int f)
     }
     grids.insert(grids.end(), mStatic.begin(), mStatic.end());
     return grids;
+}
+
+lic::Colormap loadColormap(const std::string& spec)
+{
+    if (std::filesystem::path(spec).extension() != ".csv") return lic::Colormap::named(spec);
+    std::ifstream in(spec);
+    if (!in) throw lic::InputError("colormap LUT file \"" + spec + "\" cannot be read");
+    std::stringstream text;
+    text << in.rdbuf();
+    return lic::Colormap::fromCsv(text.str(), spec);
+}
+
+Ranges bakeRanges(const Recipe& recipe, ScalarSet& scalars, const lic::OutputDomain& domain,
+                  std::optional<lic::Colormap>& cmap, const std::vector<std::uint32_t>* blocks,
+                  const HistogramReduce& reduce)
+{
+    Ranges r;
+    if (recipe.width) {
+        r.width = recipe.width->range ? *recipe.width->range
+                                      : autoRange(ScalarField(scalars.get(recipe.width->scalar)), domain, recipe.threads, blocks, reduce);
+    }
+    if (recipe.color) {
+        cmap = loadColormap(recipe.color->colormap);
+        r.color = recipe.color->range ? *recipe.color->range
+                                      : autoRange(ScalarField(scalars.get(recipe.color->scalar)), domain, recipe.threads, blocks, reduce);
+    }
+    return r;
 }
 
 } // namespace vdbexport::pipeline

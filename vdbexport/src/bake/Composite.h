@@ -69,6 +69,17 @@ struct Ranges
     std::array<double, 2> color{0.0, 1.0};
 };
 
+/// A colormap by name, or from a value,r,g,b .csv file.
+/// @throw lic::InputError for an unknown name or an unreadable or malformed file.
+lic::Colormap loadColormap(const std::string& spec);
+
+/// The recipe's width and colour ranges: given, or the automatic 1st–99th percentiles over
+/// `blocks` (null = every block; `reduce` sums a distributed bake's histograms). Loads `cmap` when
+/// the recipe colours by a scalar.
+Ranges bakeRanges(const Recipe& recipe, ScalarSet& scalars, const lic::OutputDomain& domain,
+                  std::optional<lic::Colormap>& cmap, const std::vector<std::uint32_t>* blocks = nullptr,
+                  const HistogramReduce& reduce = {});
+
 class Compositor
 {
 public:

@@ -25,11 +25,13 @@
 #include <openvdb/openvdb.h>
 
 #include <sys/resource.h>
+#include <sys/stat.h>
 
 #include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <set>
 #include <sstream>
 
 namespace vdbexport::pipeline {
@@ -107,20 +109,25 @@ nlohmann::json bakeSequence(const Recipe& request, lic::Progress& outer)
     }
     const FieldFrames frames = resolveFieldFrames(recipe.field);
     const int count = int(frames.numbers.size());
-    for (int k = 0; k < count; ++k) {
-        const std::string out = sequenceFramePath(recipe.output.path, frames.numbers[std::size_t(k)]);
-        for (const std::string& in : frames.paths) {
-            std::error_code ec;
-            if (fs::equivalent(in, out, ec)) {
-                throw lic::InputError("the bake would overwrite the input field \"" + in + "\" with \"" + out +
-                                      "\"; choose another --out");
-            }
+    // No output frame may be one of the input frames under any name (as fs::equivalent: the same
+    // device and inode; each frame's plan checks only its own pair).
+    std::set<std::pair<dev_t, ino_t>> inputs;
+    for (const std::string& in : frames.paths) {
+        struct stat st{};
+        if (::stat(in.c_str(), &st) == 0) inputs.insert({st.st_dev, st.st_ino});
+    }
+    for (int number : frames.numbers) {
+        const std::string out = sequenceFramePath(recipe.output.path, number);
+        struct stat st{};
+        if (::stat(out.c_str(), &st) == 0 && inputs.count({st.st_dev, st.st_ino})) {
+            throw lic::InputError("the bake would overwrite an input field frame with \"" + out + "\"; choose another --out");
         }
     }
     raiseFileLimit(std::size_t(count) + 1);
     openvdb::initialize();
     FrameProgress progress(outer);
 
+    const nlohmann::json resolved = recipe.toJson();
     auto output = std::make_shared<OutputSet>();
     lic::AdvectedNoise noise(recipe.input.seed);
     std::optional<lic::SpotFlock> flock;
@@ -172,16 +179,7 @@ nlohmann::json bakeSequence(const Recipe& request, lic::Progress& outer)
 
         // Scalars; automatic ranges from the first frame, kept for all (colours do not flicker).
         ScalarSet scalars(*loaded.velocity, loaded.scalars);
-        if (k == 0) {
-            if (recipe.width)
-                ranges.width = recipe.width->range ? *recipe.width->range
-                                                   : autoRange(ScalarField(scalars.get(recipe.width->scalar)), domain, recipe.threads);
-            if (recipe.color) {
-                cmap = loadColormap(recipe.color->colormap);
-                ranges.color = recipe.color->range ? *recipe.color->range
-                                                   : autoRange(ScalarField(scalars.get(recipe.color->scalar)), domain, recipe.threads);
-            }
-        }
+        if (k == 0) ranges = bakeRanges(recipe, scalars, domain, cmap);
 
         // Input: frame one as a still bake; later frames carried from the previous one.
         const auto ti = Clock::now();
@@ -234,7 +232,6 @@ nlohmann::json bakeSequence(const Recipe& request, lic::Progress& outer)
 
         // Stage the frame.
         const auto tw = Clock::now();
-        const nlohmann::json resolved = recipe.toJson();
         Description desc = describeBake(plan, resolved, loaded.gridName, layout.dim(), input.spotCount, ranges,
                                         cmap ? &*cmap : nullptr);
         desc.densityMeta.insertMeta("lic_frames", openvdb::Int32Metadata(count));
@@ -268,29 +265,13 @@ nlohmann::json bakeSequence(const Recipe& request, lic::Progress& outer)
     }
 
     // One manifest for the sequence, then every file at once.
-    nlohmann::json manifest;
-    manifest["licvdb_version"] = LICVDB_VERSION;
-    manifest["recipe"] = recipe.toJson();
-    manifest["frames"] = count;
-    manifest["first_frame"] = frames.numbers.front();
-    manifest["cyclic"] = false;
-    manifest["unsteady"] = true;
-    manifest["fps"] = recipe.field.fps;
-    manifest["velocity_unit"] = velocityUnit;
-    manifest["files"] = nlohmann::json::array();
-    for (const auto& p : paths) manifest["files"].push_back(fs::path(p).filename().string());
-    manifest["field_files"] = nlohmann::json::array();
-    for (const auto& p : frames.paths) manifest["field_files"].push_back(fs::path(p).filename().string());
-    manifest["voxel_size"] = transform0->voxelSize()[0] / double(recipe.output.upsample);
-    manifest["colormap"] = colorJson;
-    manifest["input"] = recipe.input.type;
-    manifest["spots"] = spotsJson;
-    manifest["range"] = colorJson.is_null() ? nlohmann::json(nullptr) : colorJson["range"];
-    manifest["grids"] = firstGrids;
-    for (const auto& p : paths) manifest["sha256"][fs::path(p).filename().string()] = output->sha256(p);
-    output->addText(manifestPath(recipe.output.path), manifest.dump(2) + "\n");
     if (outer.wasInterrupted()) throw lic::Cancelled();
-    output->commit();
+    nlohmann::json fieldFiles = nlohmann::json::array();
+    for (const auto& p : frames.paths) fieldFiles.push_back(fs::path(p).filename().string());
+    writeManifest(recipe, resolved, paths, *output, firstGrids, transform0->voxelSize()[0] / double(recipe.output.upsample),
+                  colorJson, spotsJson,
+                  {{"cyclic", false}, {"unsteady", true}, {"first_frame", frames.numbers.front()},
+                   {"fps", recipe.field.fps}, {"velocity_unit", velocityUnit}, {"field_files", fieldFiles}});
 
     const double total = seconds(t0);
     return {{"output", recipe.output.path},

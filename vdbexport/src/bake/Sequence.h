@@ -3,7 +3,6 @@
 
 #include "vdbexport/Recipe.h"
 
-#include "lic/Colormap.h"
 #include "lic/Progress.h"
 
 #include <nlohmann/json.hpp>
@@ -17,9 +16,5 @@ namespace vdbexport::pipeline {
 /// Returns the summary `licvdb bake --json` prints (per-frame counters and seconds).
 /// @throw lic::InputError for bad input (missing frames, frames that disagree, …); lic::Cancelled.
 nlohmann::json bakeSequence(const Recipe& recipe, lic::Progress& progress);
-
-/// A colormap by name, or from a value,r,g,b .csv file.
-/// @throw lic::InputError for an unknown name or an unreadable or malformed file.
-lic::Colormap loadColormap(const std::string& spec);
 
 } // namespace vdbexport::pipeline

@@ -116,25 +116,27 @@ Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::Met
     return out;
 }
 
-void writeManifest(const Plan& plan, const Written& written, double voxelSize, const nlohmann::json& resolved,
-                   const nlohmann::json& colorJson, const nlohmann::json& spotsJson)
+void writeManifest(const Recipe& recipe, const nlohmann::json& resolved, const std::vector<std::string>& paths,
+                   OutputSet& output, const nlohmann::json& grids, double voxelSize, const nlohmann::json& colorJson,
+                   const nlohmann::json& spotsJson, const nlohmann::json& extra)
 {
     nlohmann::json manifest;
     manifest["licvdb_version"] = LICVDB_VERSION;
     manifest["recipe"] = resolved;
-    manifest["frames"] = plan.frames;
-    manifest["cyclic"] = plan.frames > 1;
+    manifest["frames"] = paths.size();
+    manifest["cyclic"] = paths.size() > 1;
     manifest["files"] = nlohmann::json::array();
-    for (const auto& p : written.paths) manifest["files"].push_back(fs::path(p).filename().string());
+    for (const auto& p : paths) manifest["files"].push_back(fs::path(p).filename().string());
     manifest["voxel_size"] = voxelSize;
     manifest["colormap"] = colorJson;
-    manifest["input"] = plan.recipe.input.type;
+    manifest["input"] = recipe.input.type;
     manifest["spots"] = spotsJson;
     manifest["range"] = colorJson.is_null() ? nlohmann::json(nullptr) : colorJson["range"];
-    manifest["grids"] = gridsJson(written.firstGrids);
-    for (const auto& p : written.paths) manifest["sha256"][fs::path(p).filename().string()] = written.output->sha256(p);
-    written.output->addText(manifestPath(plan.recipe.output.path), manifest.dump(2) + "\n");
-    written.output->commit(); // frames first, manifest last, under a lock on the directory
+    manifest["grids"] = grids;
+    for (const auto& p : paths) manifest["sha256"][fs::path(p).filename().string()] = output.sha256(p);
+    manifest.update(extra);
+    output.addText(manifestPath(recipe.output.path), manifest.dump(2) + "\n");
+    output.commit(); // frames first, manifest last, under a lock on the directory
 }
 
 } // namespace vdbexport::pipeline

@@ -55,10 +55,12 @@ nlohmann::json gridsJson(const openvdb::GridPtrVec& grids);
 Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::MetaMap& densityMeta,
                     lic::Progress& progress, const FrameHook& gather = {});
 
-/// Write the sidecar manifest of a bake (with the frames' SHA-256), then commit the frames and
-/// the manifest together.
-void writeManifest(const Plan& plan, const Written& written, double voxelSize, const nlohmann::json& resolved,
-                   const nlohmann::json& colorJson, const nlohmann::json& spotsJson);
+/// Write the sidecar manifest of a bake (`paths`: its frame files, staged in `output`, with their
+/// SHA-256; `grids`: gridsJson() of the first frame; `extra`: keys added or replaced, e.g. an
+/// unsteady sequence's), then commit the frames and the manifest together.
+void writeManifest(const Recipe& recipe, const nlohmann::json& resolved, const std::vector<std::string>& paths,
+                   OutputSet& output, const nlohmann::json& grids, double voxelSize, const nlohmann::json& colorJson,
+                   const nlohmann::json& spotsJson, const nlohmann::json& extra = nlohmann::json::object());
 
 /// World bounds of a grid's active voxels' extents (index bbox ± ½ voxel through the transform).
 openvdb::BBoxd worldBBoxOf(const openvdb::GridBase& grid);
