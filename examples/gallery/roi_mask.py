@@ -2,7 +2,7 @@
 """Write the region-of-interest mask of a field as a float grid `mask`, for looking at it (seed
 figure 2, top centre): roi_mask.py FIELD.vdb OUT.vdb LO HI [--scalar speed]
 
-The mask is lic::roiWeight (lic/Region.h) of the speed |v| at the field's voxels: 1 for
+The mask is lic::roiWeight (lic/field/Region.h) of the speed |v| at the field's voxels: 1 for
 LO <= s <= HI, falling to 0 over 5% of (HI - LO) outside with a smoothstep. (A bake samples the
 same mask at each output voxel, trilinearly.) Uses python3-openvdb and numpy.
 """

@@ -7,9 +7,9 @@
 // targets (fast ≥ 15× faster, goal 30×).
 //
 // Run: build/tests/bench_lic [--benchmark_filter=fast]   (the naive rows take ~10–25 s each)
-#include "lic/Engine.h"
-#include "lic/FieldPresets.h"
-#include "lic/Noise.h"
+#include "lic/engine/Engine.h"
+#include "lic/field/Presets.h"
+#include "lic/texture/Noise.h"
 
 #include <benchmark/benchmark.h>
 

@@ -2,10 +2,10 @@
 // 3 widths + 3 halos should cost little more than one line. Poisson spots on the tabbed-jet
 // field (60×60×88 at upsample 2 = 2.5 M output voxels), length 20, step 0.5.
 // Run: build/tests/bench_spots   (about a minute on 2 cores)
-#include "lic/Engine.h"
-#include "lic/FieldPresets.h"
-#include "lic/Noise.h"
-#include "lic/Spots.h"
+#include "lic/engine/Engine.h"
+#include "lic/field/Presets.h"
+#include "lic/texture/Noise.h"
+#include "lic/texture/Spots.h"
 
 #include <benchmark/benchmark.h>
 

@@ -5,9 +5,9 @@
 // 19 cases for .vdb fields; the cases here are new or exercise the new readers.)
 #include "InputsHarness.h"
 
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/io/VdbIO.h"
 
-#include <lic/FieldPresets.h>
+#include <lic/field/Presets.h>
 
 #include <limits>
 #include <set>

@@ -5,8 +5,8 @@
 #include <gtest/gtest.h>
 
 #include "CliRun.h"
-#include "vdbexport/Info.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/io/Info.h"
+#include "vdbexport/io/VdbIO.h"
 
 #include <nlohmann/json.hpp>
 #include <openvdb/io/File.h>

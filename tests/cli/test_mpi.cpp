@@ -10,9 +10,9 @@
 #include <gtest/gtest.h>
 
 #include "CliRun.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/io/VdbIO.h"
 
-#include "lic/FieldPresets.h"
+#include "lic/field/Presets.h"
 
 #include <nlohmann/json.hpp>
 #include <openvdb/io/File.h>

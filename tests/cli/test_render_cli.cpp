@@ -4,7 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "CliRun.h"
-#include "vdbexport/ImageIO.h"
+#include "vdbexport/io/ImageIO.h"
 
 #include <nlohmann/json.hpp>
 

@@ -8,8 +8,8 @@
 #include "../unit/VdbMutants.h"
 #include "../unit/VdbSamples.h"
 
-#include "vdbexport/Sha256.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/io/Sha256.h"
+#include "vdbexport/io/VdbIO.h"
 
 #include <nlohmann/json.hpp>
 

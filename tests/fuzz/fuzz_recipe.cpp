@@ -1,9 +1,9 @@
 // libFuzzer target: parseRecipe (JSON → Recipe → validate) on arbitrary text; a recipe that
 // parses must serialise and parse back to the same recipe.
 // Any exception other than lic::InputError, any crash or sanitizer report is a finding.
-#include "vdbexport/Recipe.h"
+#include "vdbexport/bake/Recipe.h"
 
-#include <lic/Error.h>
+#include <lic/util/Error.h>
 
 #include <cstdint>
 #include <cstdlib>

@@ -5,10 +5,10 @@
 // is off here, so anything the check lets through reaches OpenVDB in this process.
 // Any exception other than lic::InputError, any crash, sanitizer report, allocation over the
 // -malloc_limit_mb (default: -rss_limit_mb) or time-out is a finding.
-#include "vdbexport/Info.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/io/Info.h"
+#include "vdbexport/io/VdbIO.h"
 
-#include <lic/Error.h>
+#include <lic/util/Error.h>
 
 #include <cstdint>
 #include <cstdlib>

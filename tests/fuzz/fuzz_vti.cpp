@@ -1,8 +1,8 @@
 // libFuzzer target: parseVti and parseLegacyVtk on arbitrary bytes.
 // Any exception other than lic::InputError, any crash or sanitizer report is a finding.
-#include "vdbexport/FieldInput.h"
+#include "vdbexport/io/FieldInput.h"
 
-#include <lic/Error.h>
+#include <lic/util/Error.h>
 
 #include <cstdint>
 #include <string_view>

@@ -1,4 +1,4 @@
-// Small analytic fields for unit tests, built directly (independent of lic/FieldPresets).
+// Small analytic fields for unit tests, built directly (independent of lic/field/Presets.h).
 #pragma once
 
 #include <openvdb/openvdb.h>

@@ -5,9 +5,9 @@
 // cases, uncompressed, and a streamed file without grid offsets.
 #pragma once
 
-#include <lic/FieldPresets.h>
+#include <lic/field/Presets.h>
 
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/io/VdbIO.h"
 
 #include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>

@@ -1,14 +1,14 @@
 // The streaming bake end to end (vdbexport::bake): outputs of many bricks are bit-identical for
 // 1, 2, 3 and 4 threads in every grid and every loop frame; halo ≥ density on every voxel of a
 // bake; a loop traces the same streamlines as a still; streamed percentiles are exact.
-#include "vdbexport/Bake.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/bake/Bake.h"
+#include "vdbexport/io/VdbIO.h"
 
 #include "bake/Scalars.h"
 
-#include "lic/Error.h"
-#include "lic/FieldPresets.h"
-#include "lic/Scalars.h"
+#include "lic/util/Error.h"
+#include "lic/field/Presets.h"
+#include "lic/field/Scalars.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/io/File.h>

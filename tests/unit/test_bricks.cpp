@@ -1,12 +1,12 @@
 // Bricks: the layout, brick independence (a brick's result depends only on the brick), bit-identical
 // output for any thread count over many bricks, no seams at brick faces, and the one-trace claim
 // of cyclic loops.
-#include "lic/Animation.h"
-#include "lic/Bricks.h"
-#include "lic/Contrast.h"
-#include "lic/Engine.h"
-#include "lic/Noise.h"
-#include "lic/Spots.h"
+#include "lic/composite/Animation.h"
+#include "lic/engine/Bricks.h"
+#include "lic/composite/Contrast.h"
+#include "lic/engine/Engine.h"
+#include "lic/texture/Noise.h"
+#include "lic/texture/Spots.h"
 
 #include "TestFields.h"
 

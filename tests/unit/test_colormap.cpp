@@ -1,5 +1,5 @@
-#include "lic/Colormap.h"
-#include "lic/Error.h"
+#include "lic/composite/Colormap.h"
+#include "lic/util/Error.h"
 
 #include <gtest/gtest.h>
 

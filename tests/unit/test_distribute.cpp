@@ -4,17 +4,17 @@
 // same bits as from the whole field, for noise and spots, sparse and staggered fields), and the
 // one-process Job (every collective a no-op, exceptions unchanged). The MPI runs themselves are
 // in tests/cli/test_mpi.cpp.
-#include "vdbexport/Recipe.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/bake/Recipe.h"
+#include "vdbexport/io/VdbIO.h"
 
 #include "bake/Distribute.h"
 #include "bake/FieldShare.h"
 #include "bake/Plan.h"
 
-#include "lic/Error.h"
-#include "lic/FieldPresets.h"
-#include "lic/Noise.h"
-#include "lic/Spots.h"
+#include "lic/util/Error.h"
+#include "lic/field/Presets.h"
+#include "lic/texture/Noise.h"
+#include "lic/texture/Spots.h"
 
 #include <gtest/gtest.h>
 

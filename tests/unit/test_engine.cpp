@@ -1,8 +1,8 @@
 // LIC engines: fast vs naive, closed forms, flow alignment, determinism.
-#include "lic/Animation.h"
-#include "lic/Contrast.h"
-#include "lic/Engine.h"
-#include "lic/Noise.h"
+#include "lic/composite/Animation.h"
+#include "lic/composite/Contrast.h"
+#include "lic/engine/Engine.h"
+#include "lic/texture/Noise.h"
 
 #include "TestFields.h"
 

@@ -1,7 +1,7 @@
 // VelocityField: sampling, domain, validation.
-#include "lic/Error.h"
-#include "lic/Field.h"
-#include "lic/OutputDomain.h"
+#include "lic/util/Error.h"
+#include "lic/field/Field.h"
+#include "lic/field/OutputDomain.h"
 
 #include "TestFields.h"
 

@@ -1,7 +1,7 @@
-// Unit tests for lic/FieldPresets.h: grid conventions and closed-form field values.
+// Unit tests for lic/field/Presets.h: grid conventions and closed-form field values.
 
-#include "lic/Error.h"
-#include "lic/FieldPresets.h"
+#include "lic/util/Error.h"
+#include "lic/field/Presets.h"
 
 #include <openvdb/tools/Interpolation.h>
 

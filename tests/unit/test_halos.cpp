@@ -1,13 +1,13 @@
 // Spot bakes end to end through vdbexport::bake(): region of interest (pre and post), halos that
 // enclose their lines, width series chosen by a scalar, surface-of-interest seeding, sparse output,
 // and thread determinism. Fields are small (tabbed-jet at 40×40×60) so the suite runs in seconds.
-#include "vdbexport/Bake.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/bake/Bake.h"
+#include "vdbexport/io/VdbIO.h"
 
-#include "lic/Error.h"
-#include "lic/FieldPresets.h"
-#include "lic/Region.h"
-#include "lic/Scalars.h"
+#include "lic/util/Error.h"
+#include "lic/field/Presets.h"
+#include "lic/field/Region.h"
+#include "lic/field/Scalars.h"
 
 #include "TestFields.h"
 

@@ -1,5 +1,5 @@
-#include "lic/Error.h"
-#include "lic/Noise.h"
+#include "lic/util/Error.h"
+#include "lic/texture/Noise.h"
 
 #include <gtest/gtest.h>
 

@@ -2,10 +2,10 @@
 // (NaN policy, crop, mask, resample). Fixtures are written from C++ here, so every byte is known.
 #include <gtest/gtest.h>
 
-#include "vdbexport/FieldInput.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/io/FieldInput.h"
+#include "vdbexport/io/VdbIO.h"
 
-#include <lic/Error.h>
+#include <lic/util/Error.h>
 
 #include <openvdb/openvdb.h>
 #include <zlib.h>

@@ -1,8 +1,8 @@
 // Recipe parsing, validation, round trip; TerminalProgress output and timings.
-#include <vdbexport/Recipe.h>
-#include <vdbexport/TerminalProgress.h>
+#include <vdbexport/bake/Recipe.h>
+#include <vdbexport/cli/TerminalProgress.h>
 
-#include <lic/Error.h>
+#include <lic/util/Error.h>
 
 #include <gtest/gtest.h>
 

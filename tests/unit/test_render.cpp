@@ -1,11 +1,11 @@
-// Tests of the reference halo raycaster (lic/Render.h) and image output (vdbexport/ImageIO.h):
+// Tests of the reference halo raycaster (lic/render/Raycaster.h) and image output (vdbexport/io/ImageIO.h):
 // closed forms (slab transmittance, line lighting), the halo effect on two crossing lines,
 // camera conventions, determinism, stereo, and EXR/PNG/GIF through OIIO and OCIO.
-#include "lic/Error.h"
-#include "lic/Render.h"
+#include "lic/util/Error.h"
+#include "lic/render/Raycaster.h"
 
-#include "vdbexport/ImageIO.h"
-#include "vdbexport/Render.h"
+#include "vdbexport/io/ImageIO.h"
+#include "vdbexport/render/Render.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>

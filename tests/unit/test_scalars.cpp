@@ -1,9 +1,9 @@
 // Derived scalars against closed forms: solid-body rotation, ABC flow, uniform and linear flows.
 #include "TestFields.h"
 
-#include <lic/Error.h>
-#include <lic/FieldPresets.h>
-#include <lic/Scalars.h>
+#include <lic/util/Error.h>
+#include <lic/field/Presets.h>
+#include <lic/field/Scalars.h>
 
 #include <gtest/gtest.h>
 

@@ -1,12 +1,12 @@
 // The splat engine: agreement with the naive gather on the same spots (all channels, box and exp
 // kernels, straight and diverging flows, walls), bit-identical for any thread count, work that
 // follows the lines and not the box, and one trace for a loop.
-#include "lic/Animation.h"
-#include "lic/Engine.h"
-#include "lic/FieldPresets.h"
-#include "lic/Noise.h"
-#include "lic/SplatLic.h"
-#include "lic/Spots.h"
+#include "lic/composite/Animation.h"
+#include "lic/engine/Engine.h"
+#include "lic/field/Presets.h"
+#include "lic/texture/Noise.h"
+#include "lic/engine/Splat.h"
+#include "lic/texture/Spots.h"
 
 #include "TestFields.h"
 

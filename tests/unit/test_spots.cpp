@@ -1,9 +1,9 @@
 // Spot input textures: distributions and their evenness, the smooth sphere profile, the analytic
 // multi-channel texture, the single-spot peak, halos enclosing lines, width levels, ridges.
-#include "lic/Engine.h"
-#include "lic/Noise.h"
-#include "lic/Region.h"
-#include "lic/Spots.h"
+#include "lic/engine/Engine.h"
+#include "lic/texture/Noise.h"
+#include "lic/field/Region.h"
+#include "lic/texture/Spots.h"
 
 #include "TestFields.h"
 

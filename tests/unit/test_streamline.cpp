@@ -1,6 +1,6 @@
 // Streamline integration against closed forms.
-#include "lic/Error.h"
-#include "lic/Streamline.h"
+#include "lic/util/Error.h"
+#include "lic/engine/Streamline.h"
 
 #include "TestFields.h"
 

@@ -1,16 +1,16 @@
 // Unsteady sequences end to end (vdbexport::bake on a field sequence) and their parts: the
-// carried noise and spots (lic/Unsteady.h), frame patterns (vdbexport/FieldSequence.h).
+// carried noise and spots (lic/texture/Advection.h), frame patterns (vdbexport/io/FieldSequence.h).
 // Targets of issue [motion]: on a uniform flow that moves the texture exactly 2 output voxels per
 // frame, consecutive frames match best at a shift of 2 with correlation ≥ 0.8 (noise and spots);
 // over 8 frames of a flow that changes (tornado) frame brightness varies < 5% and a spot bake's
 // active voxels stay within 25% of frame 1's; any thread count gives the same files.
-#include "vdbexport/Bake.h"
-#include "vdbexport/FieldSequence.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/bake/Bake.h"
+#include "vdbexport/io/FieldSequence.h"
+#include "vdbexport/io/VdbIO.h"
 
-#include "lic/Error.h"
-#include "lic/FieldPresets.h"
-#include "lic/Unsteady.h"
+#include "lic/util/Error.h"
+#include "lic/field/Presets.h"
+#include "lic/texture/Advection.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

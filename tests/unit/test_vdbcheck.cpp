@@ -1,4 +1,4 @@
-// Tests of vdbexport/VdbCheck.h: the structural check of .vdb files accepts every kind of real
+// Tests of vdbexport/io/VdbCheck.h: the structural check of .vdb files accepts every kind of real
 // file, refuses lying sizes before OpenVDB reads them, and hundreds of mutants of several files
 // are each either read or refused with lic::InputError — never a crash (scripts/test-sanitize
 // runs this under ASan + UBSan), never more than 10 s.
@@ -7,12 +7,12 @@
 #include "VdbMutants.h"
 #include "VdbSamples.h"
 
-#include "vdbexport/Info.h"
-#include "vdbexport/Sha256.h"
-#include "vdbexport/VdbCheck.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/io/Info.h"
+#include "vdbexport/io/Sha256.h"
+#include "vdbexport/io/VdbCheck.h"
+#include "vdbexport/io/VdbIO.h"
 
-#include <lic/Error.h>
+#include <lic/util/Error.h>
 
 #include <atomic>
 #include <chrono>

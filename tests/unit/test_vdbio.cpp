@@ -1,11 +1,11 @@
-// Tests of vdbexport/VdbIO.h and vdbexport/Info.h: reading velocity and scalar grids, the error
+// Tests of vdbexport/io/VdbIO.h and vdbexport/io/Info.h: reading velocity and scalar grids, the error
 // messages for bad files, atomic writes, and `licvdb info`'s description.
 #include <gtest/gtest.h>
 
-#include "vdbexport/Info.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/io/Info.h"
+#include "vdbexport/io/VdbIO.h"
 
-#include <lic/Error.h>
+#include <lic/util/Error.h>
 
 #include <openvdb/openvdb.h>
 

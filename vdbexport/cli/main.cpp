@@ -4,19 +4,19 @@
 // errors exit 2, other failures exit 1. Progress goes to stderr when it is a terminal; --json
 // puts a machine-readable summary on stdout.
 
-#include "vdbexport/Bake.h"
-#include "vdbexport/FieldSequence.h"
-#include "vdbexport/Distributed.h"
-#include "vdbexport/Info.h"
-#include "vdbexport/Numbers.h"
-#include "vdbexport/Recipe.h"
-#include "vdbexport/Render.h"
-#include "vdbexport/TerminalProgress.h"
-#include "vdbexport/VdbCheck.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/bake/Bake.h"
+#include "vdbexport/io/FieldSequence.h"
+#include "vdbexport/bake/Distributed.h"
+#include "vdbexport/io/Info.h"
+#include "vdbexport/io/Numbers.h"
+#include "vdbexport/bake/Recipe.h"
+#include "vdbexport/render/Render.h"
+#include "vdbexport/cli/TerminalProgress.h"
+#include "vdbexport/io/VdbCheck.h"
+#include "vdbexport/io/VdbIO.h"
 
-#include "lic/Error.h"
-#include "lic/FieldPresets.h"
+#include "lic/util/Error.h"
+#include "lic/field/Presets.h"
 
 #include <CLI/CLI.hpp>
 #include <openvdb/openvdb.h>
@@ -167,7 +167,7 @@ int main(int argc, char** argv)
     app.set_version_flag("--version", std::string("licvdb ") + LICVDB_VERSION);
     app.footer("Run `licvdb help CMD` for a command's options and examples.");
     std::string currentCommand = "licvdb";
-    // A distributed bake under mpirun/srun; started only for `bake` (see vdbexport/Distributed.h).
+    // A distributed bake under mpirun/srun; started only for `bake` (see vdbexport/bake/Distributed.h).
     vdbexport::MpiSession mpi;
 
     // field ------------------------------------------------------------------------------------

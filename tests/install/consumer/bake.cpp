@@ -1,8 +1,8 @@
 // Bake a small LIC volume with lic::vdbexport: bake OUT.vdb (writes OUT.vdb + OUT.licvdb.json).
-#include <lic/Error.h>
-#include <lic/FieldPresets.h>
-#include <vdbexport/Bake.h>
-#include <vdbexport/Recipe.h>
+#include <lic/util/Error.h>
+#include <lic/field/Presets.h>
+#include <vdbexport/bake/Bake.h>
+#include <vdbexport/bake/Recipe.h>
 
 #include <openvdb/openvdb.h>
 

@@ -1,7 +1,7 @@
 // Trace one streamline of the rotation preset with lic::lic and check it stays on its circle.
-#include <lic/Field.h>
-#include <lic/FieldPresets.h>
-#include <lic/Streamline.h>
+#include <lic/field/Field.h>
+#include <lic/field/Presets.h>
+#include <lic/engine/Streamline.h>
 
 #include <cmath>
 #include <cstdio>

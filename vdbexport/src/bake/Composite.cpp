@@ -1,13 +1,13 @@
 #include "Composite.h"
 
-#include "lic/Animation.h"
-#include "lic/Parallel.h"
-#include "lic/Region.h"
-#include "lic/Spots.h"
+#include "lic/composite/Animation.h"
+#include "lic/util/Parallel.h"
+#include "lic/field/Region.h"
+#include "lic/texture/Spots.h"
 
 #include <tbb/parallel_for.h>
 
-#include "lic/Error.h"
+#include "lic/util/Error.h"
 
 #include <algorithm>
 #include <filesystem>

@@ -11,12 +11,12 @@
 #include "Plan.h"
 #include "Scalars.h"
 
-#include "lic/Bricks.h"
-#include "lic/Colormap.h"
-#include "lic/Contrast.h"
-#include "lic/Engine.h"
-#include "lic/Field.h"
-#include "lic/Spots.h"
+#include "lic/engine/Bricks.h"
+#include "lic/composite/Colormap.h"
+#include "lic/composite/Contrast.h"
+#include "lic/engine/Engine.h"
+#include "lic/field/Field.h"
+#include "lic/texture/Spots.h"
 
 #include <openvdb/openvdb.h>
 

@@ -1,8 +1,8 @@
 #include "Distribute.h"
 
-#include "vdbexport/Distributed.h"
+#include "vdbexport/bake/Distributed.h"
 
-#include "lic/Error.h"
+#include "lic/util/Error.h"
 
 #ifdef LICVDB_WITH_MPI
 #include <mpi.h>

@@ -14,8 +14,8 @@
 // every operation here is a no-op.
 #pragma once
 
-#include "lic/Bricks.h"
-#include "lic/Error.h"
+#include "lic/engine/Bricks.h"
+#include "lic/util/Error.h"
 
 #include <openvdb/openvdb.h>
 

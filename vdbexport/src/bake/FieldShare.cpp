@@ -3,11 +3,11 @@
 #include "Distribute.h"
 #include "Scalars.h"
 
-#include "DenseCommon.h"
-#include "vdbexport/VdbIO.h"
+#include "io/DenseCommon.h"
+#include "vdbexport/io/VdbIO.h"
 
-#include "lic/Engine.h"
-#include "lic/Error.h"
+#include "lic/engine/Engine.h"
+#include "lic/util/Error.h"
 
 #include <openvdb/io/File.h>
 #include <openvdb/tree/LeafManager.h>
@@ -226,7 +226,7 @@ double spotReach(const Plan& plan)
     const double ghost = double(lic::ghostMargin(st));
     if (st.engine != lic::EngineType::Splat) return ghost + R + 2.0; // a voxel's window meets the spot
     // Splat: the spot's own line runs n·h + R (+ a sample) each way, and deposits within
-    // √(R² + slab²) of its coarse samples (lic/src/SplatLic.cpp).
+    // √(R² + slab²) of its coarse samples (lic/src/engine/Splat.cpp).
     const double slab = 2.0 * st.step + 0.5;
     return ghost + R + 1.0 + st.step + std::sqrt(R * R + slab * slab) + 1.25;
 }

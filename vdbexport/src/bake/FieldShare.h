@@ -13,11 +13,11 @@
 
 #include "Plan.h"
 
-#include "vdbexport/FieldInput.h"
+#include "vdbexport/io/FieldInput.h"
 
-#include "lic/Bricks.h"
-#include "lic/Field.h"
-#include "lic/OutputDomain.h"
+#include "lic/engine/Bricks.h"
+#include "lic/field/Field.h"
+#include "lic/field/OutputDomain.h"
 
 #include <memory>
 #include <string>

@@ -1,8 +1,8 @@
 #include "Input.h"
 
-#include "lic/Bricks.h"
-#include "lic/Error.h"
-#include "lic/Region.h"
+#include "lic/engine/Bricks.h"
+#include "lic/util/Error.h"
+#include "lic/field/Region.h"
 
 #include <memory>
 #include <optional>

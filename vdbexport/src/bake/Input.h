@@ -6,9 +6,9 @@
 #include "Plan.h"
 #include "Scalars.h"
 
-#include "lic/Noise.h"
-#include "lic/OutputDomain.h"
-#include "lic/Spots.h"
+#include "lic/texture/Noise.h"
+#include "lic/field/OutputDomain.h"
+#include "lic/texture/Spots.h"
 
 #include <cstdint>
 #include <memory>
@@ -35,7 +35,7 @@ struct SpotShare
 /// `share`: null for the whole bake (one process).
 /// @throw lic::InputError for a surface scalar without ridges above its threshold.
 /// `raw`: the noise bake's per-voxel white noise when it is not the seed's (an unsteady
-/// sequence's carried noise, lic/Unsteady.h).
+/// sequence's carried noise, lic/texture/Advection.h).
 Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& scalars, const SpotShare* share = nullptr,
                 lic::NoiseTexture::RawNoise raw = {});
 

@@ -1,9 +1,9 @@
 #include "Plan.h"
 
-#include "vdbexport/Bake.h"
+#include "vdbexport/bake/Bake.h"
 
-#include "lic/Error.h"
-#include "lic/Spots.h"
+#include "lic/util/Error.h"
+#include "lic/texture/Spots.h"
 
 #include <filesystem>
 

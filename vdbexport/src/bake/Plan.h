@@ -2,9 +2,9 @@
 // which channels and grids the bake makes), decided and validated once, before any file is read.
 #pragma once
 
-#include "vdbexport/Recipe.h"
+#include "vdbexport/bake/Recipe.h"
 
-#include "lic/Engine.h"
+#include "lic/engine/Engine.h"
 
 #include <vector>
 

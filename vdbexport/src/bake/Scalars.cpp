@@ -1,9 +1,9 @@
 #include "Scalars.h"
 
-#include "lic/Error.h"
-#include "lic/Parallel.h"
-#include "lic/Region.h"
-#include "lic/Scalars.h"
+#include "lic/util/Error.h"
+#include "lic/util/Parallel.h"
+#include "lic/field/Region.h"
+#include "lic/field/Scalars.h"
 
 #include <openvdb/tools/Dense.h>
 

@@ -2,8 +2,8 @@
 // output voxel centres, and their automatic ranges, all without arrays over the output volume.
 #pragma once
 
-#include "lic/Field.h"
-#include "lic/OutputDomain.h"
+#include "lic/field/Field.h"
+#include "lic/field/OutputDomain.h"
 
 #include <openvdb/openvdb.h>
 

@@ -1,5 +1,5 @@
 // An unsteady bake: one output frame per field frame, the input texture carried by the flow from
-// frame to frame (lic/Unsteady.h), each frame convolved along its own field. The frames are
+// frame to frame (lic/texture/Advection.h), each frame convolved along its own field. The frames are
 // staged as they are made and committed with one manifest at the end: a failed, cancelled or
 // killed sequence leaves nothing.
 #include "Sequence.h"
@@ -12,15 +12,15 @@
 #include "Scalars.h"
 #include "Write.h"
 
-#include "vdbexport/Bake.h"
-#include "vdbexport/FieldSequence.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/bake/Bake.h"
+#include "vdbexport/io/FieldSequence.h"
+#include "vdbexport/io/VdbIO.h"
 
-#include "lic/Colormap.h"
-#include "lic/Engine.h"
-#include "lic/Error.h"
-#include "lic/Region.h"
-#include "lic/Unsteady.h"
+#include "lic/composite/Colormap.h"
+#include "lic/engine/Engine.h"
+#include "lic/util/Error.h"
+#include "lic/field/Region.h"
+#include "lic/texture/Advection.h"
 
 #include <openvdb/openvdb.h>
 

@@ -1,9 +1,9 @@
 // An unsteady bake: a field sequence in, one carried-texture LIC frame per field frame out.
 #pragma once
 
-#include "vdbexport/Recipe.h"
+#include "vdbexport/bake/Recipe.h"
 
-#include "lic/Progress.h"
+#include "lic/util/Progress.h"
 
 #include <nlohmann/json.hpp>
 

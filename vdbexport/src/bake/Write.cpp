@@ -1,9 +1,9 @@
 #include "Write.h"
 
-#include "vdbexport/Bake.h"
-#include "vdbexport/VdbIO.h"
+#include "vdbexport/bake/Bake.h"
+#include "vdbexport/io/VdbIO.h"
 
-#include "lic/Colormap.h"
+#include "lic/composite/Colormap.h"
 
 #include <filesystem>
 

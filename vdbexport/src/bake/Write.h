@@ -7,8 +7,8 @@
 #include "Composite.h"
 #include "Plan.h"
 
-#include "lic/Progress.h"
-#include "vdbexport/VdbIO.h"
+#include "lic/util/Progress.h"
+#include "vdbexport/io/VdbIO.h"
 
 #include <nlohmann/json.hpp>
 

@@ -1,0 +1,75 @@
+// The output-sensitive spot engine (`--engine splat`; Seed LIC, Helgeland & Andreassen 2004;
+// Falk & Weiskopf 2008): one streamline per spot, and the spot's convolved footprint deposited
+// around it, so work and memory grow with the lines (spots × length × radius²), not with the box.
+//
+// What a gather engine gives a voxel x for one spot s of profile f (radius r) is the kernel-weighted
+// fraction of x's own streamline window that lies inside the spot:
+//     I(x) = Σ_i w_i f(|σ_x(i·h) − s|) / Σ_i w_i.
+// Where streamlines are locally parallel, σ_x runs beside the spot's own streamline σ_s at the
+// perpendicular distance d of x from σ_s, and x's window is centred at the arc τ of x's foot point
+// on σ_s (the spot at arc 0); so |σ_x(i·h) − s|² ≈ d² + (τ + i·h)² and
+//     I(x) ≈ W(τ, d) = Σ_i w_i f(√(d² + (τ + i·h)²)) / Σ_i w_i,
+// a function of two numbers, tabulated once per channel (and, for loops, with the ripple phases
+// e^{iθi} as the gather engines carry them). The splat traces σ_s over the kernel's support, finds
+// (τ, d) for every voxel within reach, and adds a_s·W(τ, d) (a_s the spot's weight). Sums over
+// spots are exact by linearity. Where the spot's line ends at a wall within the support, x's window
+// is cut there too: W is rescaled by Σ_all w_i / Σ_inside w_i (the spot's own samples are all inside,
+// so only the normalisation changes). It differs from the gather where the flow diverges or
+// converges across the tube (x's line drifts from σ_s over the window) and where a spot lies within
+// its radius of a wall. docs/technique.md §10 has the derivation and the measured agreement.
+//
+// Deterministic: spots are traced independently; each brick then deposits the spots that reach it,
+// in spot order, into its own voxels only.
+#pragma once
+
+#include "lic/engine/Engine.h"
+#include "lic/texture/Spots.h"
+
+#include <vector>
+
+namespace lic {
+
+/// W(τ, d) of every channel of a spot texture (radii `radii`, lines then halos), tabulated over
+/// τ (arc offset of a voxel's foot point from the spot, output voxels) and d (distance from the
+/// spot's streamline), for the settings' kernel; with `ripple` also Re and Im of the ripple sums.
+class SplatTables
+{
+public:
+    SplatTables(const std::vector<double>& radii, const LicSettings& settings);
+
+    int channels() const { return mC; }
+    /// Values per (τ, d): C (or 3C with ripple: A, then Re Z, then Im Z per channel).
+    int parts() const { return mParts; }
+    /// Largest distance from a spot's streamline at which any channel is non-zero.
+    double reach() const { return mReach; }
+    /// Support in τ: [tauMin, tauMax] (box: ±(n·h + reach); exp: [−(n·h + reach), reach]).
+    double tauMin() const { return mTauMin; }
+    double tauMax() const { return mTauMax; }
+    /// Add a·W(τ, d) for every part to out[0 .. parts). No-op outside the support.
+    void add(double tau, double d, float a, float* out) const;
+    /// The same sum worked out directly over window samples i0 … i1 only (a window cut by a wall),
+    /// normalised by `weight`, the kernel weight of those samples: for spots within reach of a
+    /// wall, where the part of the spot beyond the wall must not count.
+    void addDirect(double tau, double d, float a, int i0, int i1, double weight, float* out) const;
+
+private:
+    std::vector<double> mRadii;
+    double mH, mDecay, mTheta;
+    bool mExp, mRipple;
+    int mC, mParts;
+    double mReach, mTauMin, mTauMax;
+    double mDTau, mDD;
+    int mNTau, mND;
+    std::vector<float> mTable; // [tau][d][part]
+};
+
+/// convolveBricks() for spots with the splat engine: the same channels a gather engine delivers
+/// (2K, or 3·2K + 2 for a loop), brick by brick, only for bricks some spot's footprint reaches
+/// (others have nothing to show). Blocks no footprint touches are flagged in
+/// BrickChannels::blockTouched and their values are not set.
+/// @throw lic::InputError for invalid settings or radii; lic::Cancelled.
+LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
+                         const SpotSet& spots, const std::vector<double>& radii, double haloScale,
+                         const LicSettings& settings, Progress& progress, const BrickSink& sink);
+
+} // namespace lic

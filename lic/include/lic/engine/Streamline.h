@@ -1,0 +1,274 @@
+// Streamlines in world space, parameterised by arc length: fixed-step RK4 and adaptive
+// Dormand–Prince RK4(5) with error control, both emitting samples at uniform arc length.
+#pragma once
+
+#include "lic/field/Field.h"
+
+#include <openvdb/math/Vec3.h>
+
+#include <string>
+#include <vector>
+
+namespace lic {
+
+enum class Integrator { RK4, RK45 };
+
+/// Why a streamline ended.
+enum class StopReason {
+    Length,       ///< reached `maxSamples`
+    Boundary,     ///< the next sample would leave the field's domain
+    ZeroVelocity, ///< |v| fell below `minSpeed` (a critical point) or was not finite
+    Caller        ///< the per-sample callback asked to stop
+};
+
+const char* toString(Integrator);
+const char* toString(StopReason);
+/// @throw lic::InputError for anything but "rk4" or "rk45".
+Integrator integratorFromString(const std::string&);
+
+/// How to trace. All lengths are WORLD units.
+struct TraceSettings
+{
+    double step = 1.0;       ///< arc length between consecutive samples (> 0)
+    int maxSamples = 100;    ///< samples per direction, not counting the seed
+    Integrator integrator = Integrator::RK4;
+    double tolerance = 1e-4; ///< RK45: largest accepted local error per step
+    double maxStep = 4.0;    ///< RK45: largest integration step
+    double minSpeed = 0.0;   ///< |v| ≤ minSpeed counts as zero velocity
+};
+
+namespace detail {
+
+/// Unit flow direction times `sign` at a world position; false outside or at ~zero speed.
+inline bool direction(const VelocityField& f, const openvdb::Vec3d& p, double sign, double minSpeed,
+                      openvdb::Vec3d& d, StopReason& why)
+{
+    openvdb::Vec3d v;
+    if (!f.sample(p, v)) {
+        why = StopReason::Boundary;
+        return false;
+    }
+    const double len = v.length();
+    if (!(len > minSpeed) || !std::isfinite(len)) {
+        why = StopReason::ZeroVelocity;
+        return false;
+    }
+    d = v * (sign / len);
+    return true;
+}
+
+/// One classical RK4 step of length h along the unit direction field.
+inline bool rk4Step(const VelocityField& f, const openvdb::Vec3d& x, const openvdb::Vec3d& k1,
+                    double h, double sign, double minSpeed, openvdb::Vec3d& out, StopReason& why)
+{
+    openvdb::Vec3d k2, k3, k4;
+    if (!direction(f, x + k1 * (0.5 * h), sign, minSpeed, k2, why)) return false;
+    if (!direction(f, x + k2 * (0.5 * h), sign, minSpeed, k3, why)) return false;
+    if (!direction(f, x + k3 * h, sign, minSpeed, k4, why)) return false;
+    out = x + (k1 + 2.0 * (k2 + k3) + k4) * (h / 6.0);
+    return f.contains(out) || ((why = StopReason::Boundary), false);
+}
+
+StopReason traceRK45(const VelocityField& f, const openvdb::Vec3d& seed, double sign,
+                     const TraceSettings& s, std::vector<openvdb::Vec3d>& out,
+                     bool (*onSample)(void*, const openvdb::Vec3d&), void* ctx);
+
+} // namespace detail
+
+/// Trace the streamline through `seed` downstream (`sign` = +1) or upstream (−1), appending to
+/// `out` the points at arc length h, 2h, … (h = `s.step`) until `s.maxSamples` points, the
+/// domain boundary or zero velocity. The seed itself is not appended. After each appended point
+/// `onSample(point)` is called; returning false stops the trace with StopReason::Caller.
+template<typename OnSample>
+StopReason traceStreamline(const VelocityField& f, const openvdb::Vec3d& seed, double sign,
+                           const TraceSettings& s, std::vector<openvdb::Vec3d>& out,
+                           OnSample&& onSample)
+{
+    if (s.integrator == Integrator::RK45) {
+        auto thunk = [](void* c, const openvdb::Vec3d& p) -> bool {
+            return (*static_cast<std::remove_reference_t<OnSample>*>(c))(p);
+        };
+        return detail::traceRK45(f, seed, sign, s, out, thunk, &onSample);
+    }
+    StopReason why = StopReason::Length;
+    openvdb::Vec3d x = seed, k1;
+    if (!detail::direction(f, x, sign, s.minSpeed, k1, why)) return why;
+    for (int i = 0; i < s.maxSamples; ++i) {
+        openvdb::Vec3d next;
+        if (!detail::rk4Step(f, x, k1, s.step, sign, s.minSpeed, next, why)) return why;
+        out.push_back(next);
+        if (!onSample(next)) return StopReason::Caller;
+        x = next;
+        if (i + 1 < s.maxSamples && !detail::direction(f, x, sign, s.minSpeed, k1, why)) return why;
+    }
+    return StopReason::Length;
+}
+
+namespace detail {
+/// One RK4 step of world arc length h in the field's INDEX space (directions from
+/// VelocityField::directionIndex): the world-space step mapped through the affine transform.
+inline bool rk4StepIndex(const VelocityField& f, const openvdb::Vec3d& x, const openvdb::Vec3d& k1, double h,
+                         double sign, double minSpeed, openvdb::Vec3d& out)
+{
+    openvdb::Vec3d k2, k3, k4;
+    if (!f.directionIndex(x + k1 * (0.5 * h), sign, minSpeed, k2)) return false;
+    if (!f.directionIndex(x + k2 * (0.5 * h), sign, minSpeed, k3)) return false;
+    if (!f.directionIndex(x + k3 * h, sign, minSpeed, k4)) return false;
+    out = x + (k1 + 2.0 * (k2 + k3) + k4) * (h / 6.0);
+    return f.containsIndex(out);
+}
+} // namespace detail
+
+namespace detail {
+/// One side of a line being traced in index space (see traceIndexPair).
+struct IndexSide
+{
+    openvdb::Vec3d x, k1;    ///< position and direction there
+    double sign = 1.0;
+    int done = 0;            ///< samples emitted
+    bool alive = true;
+    bool single = false;     ///< single steps from here on (near a wall or critical point)
+    StopReason why = StopReason::Length;
+};
+
+/// Emit the samples of an accepted long step x → x1 (Hermite between the end points, x1 last).
+template<typename OnSample>
+bool emitLongStep(IndexSide& s, int m, double H, const openvdb::Vec3d& x1, const openvdb::Vec3d& d1, OnSample& on)
+{
+    const openvdb::Vec3d t0 = s.k1 * H, t1 = d1 * H;
+    for (int j = 1; j < m; ++j) {
+        const double t = double(j) / double(m), t2 = t * t, t3 = t2 * t;
+        const openvdb::Vec3d p = (2 * t3 - 3 * t2 + 1) * s.x + (t3 - 2 * t2 + t) * t0 + (3 * t2 - 2 * t3) * x1 +
+                                 (t3 - t2) * t1;
+        if (!on(p)) return false;
+    }
+    if (!on(x1)) return false;
+    s.x = x1;
+    s.k1 = d1;
+    s.done += m;
+    return true;
+}
+
+/// Advance one side by one long step (or, in single mode, one step of h).
+template<typename OnSample>
+void advanceSide(const VelocityField& f, IndexSide& s, const TraceSettings& ts, int stride, OnSample& on)
+{
+    if (s.done >= ts.maxSamples) {
+        s.alive = false;
+        s.why = StopReason::Length;
+        return;
+    }
+    const int m = std::min(stride, ts.maxSamples - s.done);
+    if (!s.single && m > 1) {
+        const double H = ts.step * double(m);
+        openvdb::Vec3d x1, d1;
+        if (rk4StepIndex(f, s.x, s.k1, H, s.sign, ts.minSpeed, x1) && f.directionIndex(x1, s.sign, ts.minSpeed, d1)) {
+            if (!emitLongStep(s, m, H, x1, d1, on)) {
+                s.alive = false;
+                s.why = StopReason::Caller;
+            }
+            return;
+        }
+        s.single = true;
+    }
+    openvdb::Vec3d next;
+    if (!rk4StepIndex(f, s.x, s.k1, ts.step, s.sign, ts.minSpeed, next)) {
+        s.alive = false;
+        s.why = StopReason::Boundary;
+        return;
+    }
+    if (!on(next)) {
+        s.alive = false;
+        s.why = StopReason::Caller;
+        return;
+    }
+    s.x = next;
+    ++s.done;
+    if (s.done < ts.maxSamples && !f.directionIndex(s.x, s.sign, ts.minSpeed, s.k1)) {
+        s.alive = false;
+        s.why = StopReason::Boundary;
+    }
+}
+} // namespace detail
+
+/// The fast engine's tracer: both sides of the streamline through `seedIdx` (upstream to `onBack`,
+/// downstream to `onFwd`), as two traceStreamline() calls would give them, but in the field's
+/// INDEX space (VelocityField::directionIndex; no transform per lookup) and in lockstep:
+/// the two sides' RK4 stages are interleaved, so the CPU overlaps their latency chains. RK4
+/// integrates `stride` samples per step and places the ones between by cubic Hermite
+/// interpolation; where a long step fails, that side continues in single steps of h, so it ends
+/// where a single-step trace would. Positions passed to the callbacks (`bool(const Vec3d&)`;
+/// false stops that side) are field index positions; the settings' lengths stay world units.
+/// RK45 traces each side in world space (traceStreamline) and maps each sample. Returns why each
+/// side ended {upstream, downstream}; RK4 reports walls and critical points both as Boundary.
+template<typename OnBack, typename OnFwd>
+std::pair<StopReason, StopReason> traceIndexPair(const VelocityField& f, const openvdb::Vec3d& seedIdx,
+                                                 const TraceSettings& s, int stride,
+                                                 std::vector<openvdb::Vec3d>& scratch, OnBack&& onBack,
+                                                 OnFwd&& onFwd)
+{
+    using openvdb::Vec3d;
+    if (s.integrator == Integrator::RK45) {
+        const Vec3d w = f.map().toWorld(seedIdx);
+        scratch.clear();
+        const StopReason a = traceStreamline(f, w, -1.0, s, scratch, [&](const Vec3d& p) { return onBack(f.map().toIndex(p)); });
+        scratch.clear();
+        const StopReason b = traceStreamline(f, w, +1.0, s, scratch, [&](const Vec3d& p) { return onFwd(f.map().toIndex(p)); });
+        return {a, b};
+    }
+    detail::IndexSide A, B;
+    A.sign = -1.0;
+    B.sign = +1.0;
+    A.x = B.x = seedIdx;
+    if (!f.directionIndex(seedIdx, -1.0, s.minSpeed, A.k1)) {
+        A.alive = false;
+        A.why = StopReason::Boundary;
+    }
+    if (!f.directionIndex(seedIdx, +1.0, s.minSpeed, B.k1)) {
+        B.alive = false;
+        B.why = StopReason::Boundary;
+    }
+    stride = std::max(1, stride);
+    const double h = s.step;
+    while (A.alive && B.alive) {
+        const int ma = std::min(stride, s.maxSamples - A.done), mb = std::min(stride, s.maxSamples - B.done);
+        if (A.single || B.single || ma <= 1 || mb <= 1) break;
+        // Both sides take a long step, stage by stage.
+        const double Ha = h * double(ma), Hb = h * double(mb);
+        Vec3d a2(0.0), a3(0.0), a4(0.0), b2(0.0), b3(0.0), b4(0.0), a1n(0.0), b1n(0.0), xa(0.0), xb(0.0);
+        bool okA = f.directionIndex(A.x + A.k1 * (0.5 * Ha), A.sign, s.minSpeed, a2);
+        bool okB = f.directionIndex(B.x + B.k1 * (0.5 * Hb), B.sign, s.minSpeed, b2);
+        okA = okA && f.directionIndex(A.x + a2 * (0.5 * Ha), A.sign, s.minSpeed, a3);
+        okB = okB && f.directionIndex(B.x + b2 * (0.5 * Hb), B.sign, s.minSpeed, b3);
+        okA = okA && f.directionIndex(A.x + a3 * Ha, A.sign, s.minSpeed, a4);
+        okB = okB && f.directionIndex(B.x + b3 * Hb, B.sign, s.minSpeed, b4);
+        if (okA) xa = A.x + (A.k1 + 2.0 * (a2 + a3) + a4) * (Ha / 6.0);
+        if (okB) xb = B.x + (B.k1 + 2.0 * (b2 + b3) + b4) * (Hb / 6.0);
+        okA = okA && f.containsIndex(xa) && f.directionIndex(xa, A.sign, s.minSpeed, a1n);
+        okB = okB && f.containsIndex(xb) && f.directionIndex(xb, B.sign, s.minSpeed, b1n);
+        if (okA) {
+            if (!detail::emitLongStep(A, ma, Ha, xa, a1n, onBack)) A.alive = false, A.why = StopReason::Caller;
+        } else {
+            A.single = true;
+        }
+        if (okB) {
+            if (!detail::emitLongStep(B, mb, Hb, xb, b1n, onFwd)) B.alive = false, B.why = StopReason::Caller;
+        } else {
+            B.single = true;
+        }
+        if (A.alive && A.done >= s.maxSamples) A.alive = false, A.why = StopReason::Length;
+        if (B.alive && B.done >= s.maxSamples) B.alive = false, B.why = StopReason::Length;
+    }
+    while (A.alive) detail::advanceSide(f, A, s, stride, onBack);
+    while (B.alive) detail::advanceSide(f, B, s, stride, onFwd);
+    return {A.why, B.why};
+}
+
+/// Convenience overload without a callback.
+inline StopReason traceStreamline(const VelocityField& f, const openvdb::Vec3d& seed, double sign,
+                                  const TraceSettings& s, std::vector<openvdb::Vec3d>& out)
+{
+    return traceStreamline(f, seed, sign, s, out, [](const openvdb::Vec3d&) { return true; });
+}
+
+} // namespace lic

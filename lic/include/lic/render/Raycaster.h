@@ -1,0 +1,249 @@
+// The reference halo raycaster (seed §6): front-to-back emission–absorption raymarching of the
+// line (`density`) and halo (`halo`) volumes together, with illuminated lines (Zöckler, Stalling &
+// Hege 1996), orbit cameras in Blender's conventions (Z up) and stereo pairs. Works on in-memory
+// grids and produces a scene-linear RGBA float image; file I/O lives in vdbexport.
+#pragma once
+
+#include "lic/composite/Colormap.h"
+#include "lic/util/Progress.h"
+
+#include <openvdb/math/Ray.h>
+#include <openvdb/openvdb.h>
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace lic {
+
+// ---- cameras --------------------------------------------------------------------------------
+
+enum class Projection { Perspective, Orthographic };
+const char* toString(Projection);
+
+/// A camera in world space. `right`, `up` and `forward` are unit and orthogonal, with
+/// right × up = −forward (a right-handed frame looking down its own −Z, as Blender's camera).
+/// The image has `width` × `height` square pixels; pixel (0, 0) is the top-left one, rows go
+/// down, and the ray of pixel (i, j) passes through its centre (i + ½, j + ½).
+struct Camera
+{
+    Projection projection = Projection::Perspective;
+    openvdb::Vec3d position{0.0, -1.0, 0.0}; ///< world units
+    openvdb::Vec3d forward{0.0, 1.0, 0.0};   ///< viewing direction
+    openvdb::Vec3d up{0.0, 0.0, 1.0};        ///< image up
+    openvdb::Vec3d right{1.0, 0.0, 0.0};     ///< image right
+    openvdb::Vec3d target{0.0, 0.0, 0.0};    ///< the orbit centre (world bbox centre)
+    double fovY = 30.0;        ///< perspective: full vertical field of view, degrees
+    double orthoWidth = 1.0;   ///< orthographic: width of the view, world units
+    double orthoHeight = 1.0;  ///< orthographic: height of the view, world units
+    int width = 512;           ///< pixels
+    int height = 512;          ///< pixels
+    double azimuth = 0.0;      ///< degrees, as set up by makeCamera (informational)
+    double elevation = 0.0;    ///< degrees, as set up by makeCamera (informational)
+    double distance = 1.0;     ///< |position − target|, world units
+
+    /// Full horizontal field of view in degrees (perspective).
+    double fovX() const;
+    /// The world ray through continuous pixel coordinates (x, y) (pixel centres at +½):
+    /// unit direction; perspective rays start at `position`, orthographic ones on the image
+    /// plane through `position`.
+    openvdb::math::Ray<double> ray(double x, double y) const;
+};
+
+/// Named views, Blender's numpad views with Z up: front looks along +Y (camera on −Y), back
+/// along −Y, right along −X (camera on +X), left along +X, top down −Z (X right, Y up in the
+/// image), bottom up +Z (X right, −Y up in the image).
+enum class View { Front, Back, Left, Right, Top, Bottom };
+/// @throw lic::InputError for names other than front, back, left, right, top, bottom.
+View viewFromString(const std::string&);
+const char* toString(View);
+/// The (azimuth, elevation) in degrees of a named view (see CameraSettings).
+std::pair<double, double> viewAngles(View);
+
+/// How to place an orbit camera around a world box.
+///
+/// Azimuth A and elevation E (degrees) put the camera in direction
+/// d = (sin A cos E, −cos A cos E, sin E) from the box centre, looking back at it: A = 0 is the
+/// front view (camera on −Y), A = 90 the right view (camera on +X), E = 90 the top view.
+/// Image right is (cos A, sin A, 0) and image up = right × forward, so Z is up whenever |E| < 90.
+struct CameraSettings
+{
+    double azimuth = 0.0;   ///< degrees
+    double elevation = 0.0; ///< degrees, in [−90, 90]
+    /// World units from the box centre to the camera; unset: perspective is placed at the
+    /// smallest distance that fits the box's 8 corners in the frame (less `margin`),
+    /// orthographic at 2 × the box's bounding-sphere radius (any distance outside the box
+    /// renders the same).
+    std::optional<double> distance;
+    double fovY = 30.0;          ///< perspective: vertical field of view, degrees, in (0, 180)
+    bool orthographic = false;
+    /// Orthographic: the view's height in world units; unset: fit the box (less `margin`).
+    std::optional<double> orthoHeight;
+    int width = 1024;            ///< pixels, ≥ 1
+    int height = 1024;           ///< pixels, ≥ 1
+    double margin = 0.04;        ///< fraction of the half-frame left empty around the fitted box
+
+    /// @throw lic::InputError naming the first out-of-range value.
+    void validate() const;
+};
+
+/// @brief An orbit camera framing world box `box` (normally the active voxels' world bbox).
+/// @throw lic::InputError for bad settings (see CameraSettings::validate) or an empty box. A
+///        camera inside the box is allowed (rays then start at the camera).
+Camera makeCamera(const CameraSettings& settings, const openvdb::BBoxd& box);
+
+/// @brief The left and right eyes of a stereo pair around `centre`: the camera orbited about
+///        the target, around its `up` axis, by ∓atan(eyeSeparation / 2 / distance), so both
+///        eyes converge on the target (zero parallax there). Works for both projections.
+/// @param eyeSeparation world units between the eyes (> 0)
+std::pair<Camera, Camera> stereoPair(const Camera& centre, double eyeSeparation);
+
+// ---- images ---------------------------------------------------------------------------------
+
+/// A scene-linear RGBA float image, rows top to bottom, premultiplied alpha (black background:
+/// alpha = 1 − transmittance of the ray).
+struct Image
+{
+    int width = 0;
+    int height = 0;
+    std::vector<float> rgba; ///< 4 × width × height
+
+    Image() = default;
+    Image(int w, int h) : width(w), height(h), rgba(std::size_t(w) * std::size_t(h) * 4, 0.0f) {}
+    float* pixel(int x, int y) { return rgba.data() + (std::size_t(y) * std::size_t(width) + std::size_t(x)) * 4; }
+    const float* pixel(int x, int y) const
+    {
+        return rgba.data() + (std::size_t(y) * std::size_t(width) + std::size_t(x)) * 4;
+    }
+};
+
+enum class StereoMode { None, SideBySide, Anaglyph };
+/// @throw lic::InputError for names other than none, sbs, anaglyph.
+StereoMode stereoFromString(const std::string&);
+const char* toString(StereoMode);
+
+/// Left eye on the left, right eye on the right (parallel viewing): 2W × H.
+Image sideBySide(const Image& left, const Image& right);
+/// Red–cyan anaglyph: red from the left eye, green and blue from the right. W × H.
+Image anaglyph(const Image& left, const Image& right);
+
+// ---- the volume and the transfer function ---------------------------------------------------
+
+/// The grids a render reads (world-space grids; all optional but `density`). Grids may have
+/// different transforms: the others are resampled onto `density`'s voxels (trilinear).
+struct RenderVolume
+{
+    openvdb::FloatGrid::ConstPtr density; ///< lines, [0, 1]; required
+    openvdb::FloatGrid::ConstPtr halo;    ///< halo texture, [0, 1]; halo ≥ density on the lines
+    openvdb::Vec3SGrid::ConstPtr color;   ///< scene-linear Rec.709
+    openvdb::FloatGrid::ConstPtr scalar;  ///< [0, 1], coloured through RenderSettings::colormap
+    openvdb::Vec3SGrid::ConstPtr tangent; ///< unit flow direction (world)
+    openvdb::Vec3SGrid::ConstPtr flow;    ///< velocity field: the tangent where `tangent` is absent
+};
+
+/// Directional lighting of lines (Zöckler et al. 1996). With T the unit line tangent, L the
+/// unit direction towards the light and V the unit direction towards the eye:
+/// diffuse = √(1 − (L·T)²), V·R = √(1 − (L·T)²)·√(1 − (V·T)²) − (L·T)(V·T), and
+/// shade = colour·(ambient + diffuse·diffuse-term) + specular·max(V·R, 0)^shininess.
+struct Lighting
+{
+    bool enabled = true;     ///< false (or no tangent): shade = colour
+    bool headlight = true;   ///< L = V (a light at the eye)
+    openvdb::Vec3d direction{0.0, -1.0, 1.0}; ///< towards the light, world, when not a headlight
+    double ambient = 0.2;
+    double diffuse = 0.8;
+    double specular = 0.35;
+    double shininess = 16.0;
+};
+
+/// The shading of a line of unit tangent `t` seen from unit direction `v` (towards the eye)
+/// lit from unit direction `l` (towards the light), for white: see Lighting. Public for tests.
+/// Returns {diffuse + ambient part (multiplies colour), specular part (white)}.
+std::pair<double, double> lineShade(const Lighting& lighting, const openvdb::Vec3d& t, const openvdb::Vec3d& l,
+                                    const openvdb::Vec3d& v);
+
+/// How to turn the volume into light.
+///
+/// Transfer: density ρ (trilinear) is first windowed, ρ' = clamp((ρ − lo)/(hi − lo), 0, 1);
+/// extinction σ = densityScale · ρ' per voxel length (the density grid's smallest voxel edge), so
+/// a slab of uniform ρ' and thickness d voxels transmits exp(−densityScale·ρ'·d). Emission is
+/// proportional to absorption (a glowing medium of colour c): a step of opacity α adds
+/// T·α·brightness·shade(c) to the pixel, T the transmittance so far. Black background.
+///
+/// Halos (seed §6): the ray is inside a halo where halo > haloThreshold. At each halo exit the
+/// accumulated opacity A = 1 − T is raised to min(1, A + haloStrength·max), max the largest halo
+/// value inside that halo segment. Only exits raise it, so the segment of the first halo on the
+/// ray (the one around the first line hit) is composited normally.
+struct RenderSettings
+{
+    /// Extinction per unit (windowed) density per voxel length (> 0). 0 = auto: 2 for a line bake
+    /// (the volume has a `halo` grid), so each line is nearly opaque; otherwise (dense noise
+    /// bakes) chosen so that an average ray across the active box has optical depth 2.5:
+    /// K = 2.5 / (mean ρ' over the box × mean box edge in voxels), clamped to [0.001, 8].
+    /// HaloRaycaster::settings() holds the value used.
+    double densityScale = 0.0;
+    double densityLow = 0.0;    ///< transfer window: density ≤ lo is transparent
+    double densityHigh = 1.0;   ///< transfer window: density ≥ hi has full extinction (> lo)
+    double brightness = 1.0;    ///< emission multiplier (≥ 0)
+    double step = 0.5;          ///< ray step, voxels (> 0)
+    bool halos = true;          ///< use the halo grid if there is one
+    double haloStrength = 1.0;  ///< ≥ 0
+    double haloThreshold = 0.05;///< in [0, 1)
+    std::optional<Colormap> colormap; ///< colour from `scalar` through this map (else `color`, else white)
+    Lighting lighting;
+    /// Stop a ray once its transmittance falls below this (early ray termination).
+    double minTransmittance = 1e-3;
+    bool emptySpaceSkipping = true; ///< skip 8³ bricks that cannot contribute (same result)
+    int threads = 0;            ///< worker threads, 0 = all cores
+
+    /// @throw lic::InputError naming the first out-of-range value.
+    void validate() const;
+};
+
+/// Counters of one render (identical for any thread count).
+struct RenderStats
+{
+    std::uint64_t rays = 0;
+    std::uint64_t samples = 0;        ///< density/halo samples taken
+    std::uint64_t skippedBricks = 0;  ///< brick crossings skipped as empty
+};
+
+/// @brief The raycaster: copies the volume once into dense, padded arrays over the active
+///        bounding box (plus an 8³-brick occupancy table for empty-space skipping), then renders
+///        any number of views of it.
+///
+/// Rendering is parallel over 32 × 32-pixel tiles (TBB) and deterministic: every pixel is
+/// computed independently, so images are bit-identical for any thread count.
+class HaloRaycaster
+{
+public:
+    /// @throw lic::InputError if `density` is missing, has no active voxels, or a grid has a
+    ///        non-linear transform; if a colormap is set but there is no `scalar` grid; if the
+    ///        padded bounding box exceeds 2^31 voxels. lic::Cancelled if `progress` asks.
+    HaloRaycaster(const RenderVolume& volume, const RenderSettings& settings,
+                  Progress& progress = nullProgress());
+    ~HaloRaycaster();
+    HaloRaycaster(const HaloRaycaster&) = delete;
+    HaloRaycaster& operator=(const HaloRaycaster&) = delete;
+
+    /// World bounding box of the active voxels of `density` (and `halo`): min − ½ … max + ½
+    /// voxel through the transform.
+    const openvdb::BBoxd& worldBBox() const;
+    bool hasHalo() const;    ///< a halo grid was given (halos are used if settings.halos too)
+    bool hasColor() const;   ///< colour from `color` or a colormap
+    bool hasTangent() const; ///< illumination possible (tangent grid or flow field)
+    /// The settings in use (densityScale resolved when it was 0 = auto).
+    const RenderSettings& settings() const;
+
+    /// @brief Render one view. @throw lic::Cancelled if `progress` asks.
+    Image render(const Camera& camera, Progress& progress = nullProgress(), RenderStats* stats = nullptr) const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> mImpl;
+};
+
+} // namespace lic

@@ -1,2 +1,0 @@
-#include "lic/Error.h"
-// Anchors the exception types in the library (nothing else to define).

@@ -1,0 +1,532 @@
+#include "lic/engine/Splat.h"
+
+#include "lic/util/Error.h"
+#include "lic/util/Parallel.h"
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <array>
+#include <map>
+
+namespace lic {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+/// Kernel weight of window sample i (box: i in [−n, n]; exp: i in [0, n], c^i).
+struct Window
+{
+    int lo, hi;        // sample offsets
+    bool exp;
+    double decay;
+    double weight(int i) const { return exp ? std::pow(decay, double(i)) : 1.0; }
+    double total() const
+    {
+        double t = 0;
+        for (int i = lo; i <= hi; ++i) t += weight(i);
+        return t;
+    }
+};
+
+/// The ripple normalisation Σ w_i e^{iθi} / Σ w_i over window samples i0 … i1 (as Re, Im). Box
+/// over a whole window: 0 up to rounding, returned as exactly 0 (the period is the window).
+std::array<double, 2> rippleNorm(const Window& win, double theta, int i0, int i1)
+{
+    if (!win.exp && i0 == win.lo && i1 == win.hi) return {0.0, 0.0};
+    double nr = 0, ni = 0, total = 0;
+    for (int i = i0; i <= i1; ++i) {
+        const double w = win.weight(i);
+        nr += w * std::cos(theta * double(i));
+        ni += w * std::sin(theta * double(i));
+        total += w;
+    }
+    return {nr / total, ni / total};
+}
+
+Window windowOf(const LicSettings& s)
+{
+    const int n = s.halfSamples();
+    const bool exp = s.kernel == KernelType::Exp;
+    return {exp ? 0 : -n, n, exp, s.decay};
+}
+
+} // namespace
+
+SplatTables::SplatTables(const std::vector<double>& radii, const LicSettings& settings)
+    : mRadii(radii)
+    , mH(settings.step)
+    , mDecay(settings.decay)
+    , mTheta(detail::rippleStep(settings))
+    , mExp(settings.kernel == KernelType::Exp)
+    , mRipple(settings.ripple)
+    , mC(int(radii.size()))
+    , mParts(settings.ripple ? 3 * int(radii.size()) : int(radii.size()))
+    , mReach(0)
+{
+    const double h = settings.step;
+    const Window win = windowOf(settings);
+    for (double r : radii) mReach = std::max(mReach, r + 0.5 * std::min(1.0, r));
+    mTauMin = -(double(win.hi) * h + mReach);
+    mTauMax = -double(win.lo) * h + mReach;
+    mDTau = h / 4.0;
+    mDD = 1.0 / 16.0;
+    mNTau = int(std::ceil((mTauMax - mTauMin) / mDTau)) + 1;
+    mND = int(std::ceil(mReach / mDD)) + 2;
+    mTable.assign(std::size_t(mNTau) * std::size_t(mND) * std::size_t(mParts), 0.0f);
+    const double total = win.total();
+    const double theta = detail::rippleStep(settings);
+    tbb::parallel_for(0, mNTau, [&](int t) {
+        const double tau = mTauMin + double(t) * mDTau;
+        // Only the window samples within reach of the spot contribute.
+        const int i0 = std::max(win.lo, int(std::ceil((-mReach - tau) / h)));
+        const int i1 = std::min(win.hi, int(std::floor((mReach - tau) / h)));
+        for (int di = 0; di < mND; ++di) {
+            const double d = double(di) * mDD;
+            float* out = &mTable[(std::size_t(t) * std::size_t(mND) + std::size_t(di)) * std::size_t(mParts)];
+            for (int c = 0; c < mC; ++c) {
+                double a = 0, zr = 0, zi = 0;
+                for (int i = i0; i <= i1; ++i) {
+                    const double along = tau + double(i) * h;
+                    double slope;
+                    const double f = spotProfile(std::sqrt(d * d + along * along), radii[std::size_t(c)], slope);
+                    if (f == 0.0) continue;
+                    a += win.weight(i) * f;
+                    if (settings.ripple) {
+                        zr += win.weight(i) * f * std::cos(theta * double(i));
+                        zi += win.weight(i) * f * std::sin(theta * double(i));
+                    }
+                }
+                out[c] = float(a / total);
+                if (settings.ripple) {
+                    out[mC + c] = float(zr / total);
+                    out[2 * mC + c] = float(zi / total);
+                }
+            }
+        }
+    });
+}
+
+void SplatTables::add(double tau, double d, float a, float* out) const
+{
+    if (!(tau >= mTauMin && tau <= mTauMax && d < mReach)) return;
+    const double ft = (tau - mTauMin) / mDTau, fd = d / mDD;
+    const int t0 = std::min(int(ft), mNTau - 2), d0 = std::min(int(fd), mND - 2);
+    const float wt = float(ft - t0), wd = float(fd - d0);
+    const std::size_t P = std::size_t(mParts), row = std::size_t(mND) * P;
+    const float* c00 = &mTable[(std::size_t(t0) * std::size_t(mND) + std::size_t(d0)) * P];
+    const float* c01 = c00 + P;
+    const float* c10 = c00 + row;
+    const float* c11 = c10 + P;
+    const float w00 = a * (1 - wt) * (1 - wd), w01 = a * (1 - wt) * wd, w10 = a * wt * (1 - wd), w11 = a * wt * wd;
+    for (std::size_t p = 0; p < P; ++p) out[p] += w00 * c00[p] + w01 * c01[p] + w10 * c10[p] + w11 * c11[p];
+}
+
+void SplatTables::addDirect(double tau, double d, float a, int i0, int i1, double weight, float* out) const
+{
+    i0 = std::max(i0, int(std::ceil((-mReach - tau) / mH)));
+    i1 = std::min(i1, int(std::floor((mReach - tau) / mH)));
+    for (int i = i0; i <= i1; ++i) {
+        const double along = tau + double(i) * mH, r = std::sqrt(d * d + along * along);
+        const double w = (mExp ? std::pow(mDecay, double(i)) : 1.0) * double(a) / weight;
+        for (int c = 0; c < mC; ++c) {
+            double slope;
+            const double f = spotProfile(r, mRadii[std::size_t(c)], slope);
+            if (f == 0.0) continue;
+            out[c] += float(w * f);
+            if (mRipple) {
+                out[mC + c] += float(w * f * std::cos(mTheta * double(i)));
+                out[2 * mC + c] += float(w * f * std::sin(mTheta * double(i)));
+            }
+        }
+    }
+}
+
+namespace {
+
+/// One spot's streamline, output-index positions every h.
+struct SpotLine
+{
+    std::size_t first = 0;   // into the shared point array
+    int count = 0;           // samples
+    int centre = 0;          // index of the spot itself among them
+    double endBack = -1e300; // arc of a natural end upstream (a wall or critical point), else −∞
+    double endFwd = 1e300;   // … downstream, else +∞
+    openvdb::Vec3f lo, hi;   // bounds of the samples
+    openvdb::Vec3f tangent;  // unit flow direction at the spot (output index space)
+};
+
+/// Column-major 3×3 in output index units: G_j maps an offset from the line at sample j back to
+/// the offset it came from at the spot (the inverse of the flow map's Jacobian along the line).
+using Xform = std::array<float, 9>;
+
+/// Transports of offsets along one spot line: M(s) solves dM/ds = J_u M, M(0) = I, where J_u is
+/// the Jacobian of the unit flow direction (world units; arc s in world units), so an offset δ at
+/// the spot becomes M(s)δ at arc s. Returns G_j = A⁻¹ M(s_j)⁻¹ A per sample, A = the output
+/// index→world linear map.
+void transports(const VelocityField& field, const OutputDomain& domain, const std::vector<openvdb::Vec3f>& pts,
+                int centre, double hWorld, std::vector<Xform>& out)
+{
+    using openvdb::Mat3d;
+    const openvdb::Mat4d& iw = domain.map().indexToWorld; // row-vector layout: w = q·iw
+    Mat3d A; // column convention: w = A q
+    for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) A[a][b] = iw[b][a];
+    const Mat3d Ainv = A.inverse();
+    const int n = int(pts.size());
+    std::vector<Mat3d> J(std::size_t(n), Mat3d::zero());
+    for (int j = 0; j < n; ++j) {
+        openvdb::Vec3d v;
+        Mat3d dv;
+        if (!field.sampleGradient(domain.map().toWorld(openvdb::Vec3d(pts[std::size_t(j)])), v, dv)) continue;
+        const double len = v.length();
+        if (!(len > 0)) continue;
+        const openvdb::Vec3d u = v / len;
+        Mat3d P = Mat3d::identity(); // projector off u
+        for (int a = 0; a < 3; ++a)
+            for (int b = 0; b < 3; ++b) P[a][b] -= u[a] * u[b];
+        J[std::size_t(j)] = (P * dv) * (1.0 / len);
+    }
+    auto step = [&](const Mat3d& Jm, double hs) { // I + hs J + hs²/2 J²
+        return Mat3d::identity() + Jm * hs + (Jm * Jm) * (0.5 * hs * hs);
+    };
+    std::vector<Mat3d> M(std::size_t(n), Mat3d::identity());
+    for (int j = centre + 1; j < n; ++j) M[std::size_t(j)] = step(J[std::size_t(j - 1)], hWorld) * M[std::size_t(j - 1)];
+    for (int j = centre - 1; j >= 0; --j) M[std::size_t(j)] = step(J[std::size_t(j + 1)], -hWorld) * M[std::size_t(j + 1)];
+    out.resize(std::size_t(n));
+    for (int j = 0; j < n; ++j) {
+        Mat3d G = Mat3d::identity();
+        const double det = M[std::size_t(j)].det();
+        if (std::abs(det) > 1e-12) G = Ainv * M[std::size_t(j)].inverse() * A;
+        else G = Mat3d::identity() * 1e6; // lines squeezed to nothing: push every voxel out of reach
+        for (int a = 0; a < 3; ++a)
+            for (int b = 0; b < 3; ++b) out[std::size_t(j)][std::size_t(b * 3 + a)] = float(G[a][b]);
+    }
+}
+
+/// Per-thread buffers of the splat: the brick's accumulators and the per-spot rasterisation state.
+struct SplatScratch
+{
+    std::vector<float> acc;            // voxel × channels
+    std::vector<float> nearest;        // voxel: distance to the nearest spot line so far (loops)
+    std::vector<std::uint8_t> dirty;   // local block: accumulators in use
+    std::vector<std::uint32_t> stamp;  // voxel: spot generation of best/arc
+    std::vector<float> best, arc;      // voxel: squared distance and arc of the nearest line point
+    std::vector<openvdb::Vec3f> offset;// voxel: its offset from that point (output index units)
+    std::vector<std::int32_t> foot;    // voxel: the line sample nearest that point
+    std::vector<std::int64_t> touched; // voxels reached by the current spot
+    std::vector<float> out;            // the brick's channels, handed to the sink
+    std::vector<std::uint8_t> blockTouched;
+    std::vector<float> parts;
+    BrickIndex index;
+    std::uint32_t generation = 0;
+    LicStats stats;
+};
+
+} // namespace
+
+LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
+                         const SpotSet& spots, const std::vector<double>& radii, double haloScale,
+                         const LicSettings& settings, Progress& progress, const BrickSink& sink)
+{
+    settings.validate();
+    if (radii.empty() || radii.size() > 4) {
+        throw InputError("input.radii has " + std::to_string(radii.size()) +
+                         " radii; between 1 and 4 width levels are supported");
+    }
+    const auto start = std::chrono::steady_clock::now();
+    std::vector<double> channelRadii(radii);
+    for (double r : radii) channelRadii.push_back(r * haloScale);
+    const int C = int(channelRadii.size());
+    const int K = settings.ripple ? 3 * C + 2 : C;
+    const double h = settings.step;
+    const Window win = windowOf(settings);
+    const double winTotal = win.total();
+    const double theta = detail::rippleStep(settings);
+    const std::array<double, 2> wholeNorm = rippleNorm(win, theta, win.lo, win.hi); // box: (0, 0)
+    constexpr std::size_t V = OutputDomain::kBlockVoxels;
+
+    progress.begin("splat", domain.activeVoxelCount());
+    const SplatTables tables(channelRadii, settings);
+    const double reach = tables.reach();
+
+    // 1. Trace every spot's streamline over the kernel's support (independent per spot).
+    TraceSettings ts = detail::traceSettings(field, domain, settings);
+    ts.maxSamples = int(std::ceil((std::max(-tables.tauMin(), tables.tauMax()) + 1.0) / h));
+    const int stride = detail::integrationStride(domain, settings);
+    const double up = double(domain.upsample()), upOff = 0.5 * (up - 1.0);
+    std::vector<std::vector<openvdb::Vec3f>> linePts(spots.centers.size());
+    std::vector<std::vector<Xform>> lineXf(spots.centers.size());
+    std::vector<SpotLine> lines(spots.centers.size());
+    const double hWorld = h * domain.voxelSize();
+    detail::runWithThreads(settings.threads, [&] {
+        tbb::enumerable_thread_specific<std::pair<std::vector<openvdb::Vec3f>, std::vector<openvdb::Vec3d>>> tls;
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, spots.centers.size(), 64), [&](const auto& r) {
+            auto& [back, scratch] = tls.local();
+            for (std::size_t s = r.begin(); s != r.end(); ++s) {
+                const openvdb::Vec3d& c = spots.centers[s];
+                std::vector<openvdb::Vec3f>& pts = linePts[s];
+                back.clear();
+                pts.clear();
+                auto toOut = [&](const openvdb::Vec3d& p) {
+                    return openvdb::Vec3f(float(p[0] * up + upOff), float(p[1] * up + upOff), float(p[2] * up + upOff));
+                };
+                const openvdb::Vec3d seedIdx((c[0] - upOff) / up, (c[1] - upOff) / up, (c[2] - upOff) / up);
+                const auto [whyB, whyF] = traceIndexPair(
+                    field, seedIdx, ts, stride, scratch,
+                    [&](const openvdb::Vec3d& p) { back.push_back(toOut(p)); return true; },
+                    [&](const openvdb::Vec3d& p) { pts.push_back(toOut(p)); return true; });
+                // Assemble upstream … spot … downstream.
+                std::vector<openvdb::Vec3f> all(back.rbegin(), back.rend());
+                all.push_back(openvdb::Vec3f(float(c[0]), float(c[1]), float(c[2])));
+                all.insert(all.end(), pts.begin(), pts.end());
+                SpotLine& L = lines[s];
+                L.count = int(all.size());
+                L.centre = int(back.size());
+                auto natural = [](StopReason w) { return w == StopReason::Boundary || w == StopReason::ZeroVelocity; };
+                // The wall (or critical point) lies between the last sample and the next one: take
+                // the middle, so a voxel's window is cut where, on average, its own line ends.
+                if (natural(whyB)) L.endBack = -(double(back.size()) + 0.5) * h;
+                if (natural(whyF)) L.endFwd = (double(pts.size()) + 0.5) * h;
+                L.lo = L.hi = all.front();
+                for (const auto& p : all) {
+                    L.lo = openvdb::math::minComponent(L.lo, p);
+                    L.hi = openvdb::math::maxComponent(L.hi, p);
+                }
+                const int cn = std::min(L.count - 1, L.centre + 1), cp = std::max(0, L.centre - 1);
+                L.tangent = all[std::size_t(cn)] - all[std::size_t(cp)];
+                if (L.tangent.length() > 0) L.tangent.normalize();
+                transports(field, domain, all, L.centre, hWorld, lineXf[s]);
+                pts.swap(all);
+            }
+        });
+    });
+    std::vector<openvdb::Vec3f> points, tangents;
+    std::vector<Xform> xforms;
+    std::uint64_t samples = 0;
+    for (std::size_t s = 0; s < lines.size(); ++s) {
+        lines[s].first = points.size();
+        points.insert(points.end(), linePts[s].begin(), linePts[s].end());
+        xforms.insert(xforms.end(), lineXf[s].begin(), lineXf[s].end());
+        // Unit direction at every sample (central differences; one-sided at the ends).
+        const std::vector<openvdb::Vec3f>& p = linePts[s];
+        for (int j = 0; j < int(p.size()); ++j) {
+            openvdb::Vec3f t = p[std::size_t(std::min(int(p.size()) - 1, j + 1))] - p[std::size_t(std::max(0, j - 1))];
+            const float tl = t.length();
+            tangents.push_back(tl > 0 ? t / tl : openvdb::Vec3f(0.0f));
+        }
+        samples += std::uint64_t(lines[s].count);
+        std::vector<openvdb::Vec3f>().swap(linePts[s]);
+        std::vector<Xform>().swap(lineXf[s]);
+    }
+
+    // 2. Which spots reach which brick (in spot order).
+    const int dim = layout.dim();
+    std::map<openvdb::Coord, std::size_t> brickAt;
+    for (std::size_t b = 0; b < layout.size(); ++b) {
+        const openvdb::Coord& o = layout[b].box.min();
+        brickAt[openvdb::Coord(detail::floorDiv(o[0], dim), detail::floorDiv(o[1], dim), detail::floorDiv(o[2], dim))] = b;
+    }
+    std::vector<std::vector<std::uint32_t>> spotsOf(layout.size());
+    for (std::size_t s = 0; s < lines.size(); ++s) {
+        const SpotLine& L = lines[s];
+        openvdb::Coord lo, hi;
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = detail::floorDiv(int(std::floor(L.lo[a] - reach - 1.0)), dim);
+            hi[a] = detail::floorDiv(int(std::ceil(L.hi[a] + reach + 1.0)), dim);
+        }
+        for (int x = lo[0]; x <= hi[0]; ++x)
+            for (int y = lo[1]; y <= hi[1]; ++y)
+                for (int z = lo[2]; z <= hi[2]; ++z)
+                    if (auto it = brickAt.find(openvdb::Coord(x, y, z)); it != brickAt.end())
+                        spotsOf[it->second].push_back(std::uint32_t(s));
+    }
+
+    // 3. Each brick deposits the footprints of its spots into its own voxels.
+    constexpr int kCoarse = 4; // rasterise around every 4th sample (2 voxels apart at h = ½)
+    // A voxel within reach of the line inside a coarse sample's slab (half-width S·h/2 + ½ along
+    // the line) lies within √(reach² + slab²) of that sample.
+    const double slabHalf = 0.5 * kCoarse * h + 0.5;
+    const double rho = std::sqrt(reach * reach + slabHalf * slabHalf) + 0.25;
+    tbb::enumerable_thread_specific<SplatScratch> scratch;
+    auto runBrick = [&](std::size_t b) {
+        SplatScratch& sc = scratch.local();
+        const Brick& brick = layout[b];
+        sc.index = BrickIndex(domain, brick, dim);
+        const BrickIndex& bi = sc.index;
+        const std::size_t voxels = bi.voxels(), blocks = voxels / V;
+        sc.acc.resize(voxels * std::size_t(K));
+        sc.nearest.resize(voxels);
+        sc.stamp.resize(voxels, 0);
+        sc.best.resize(voxels);
+        sc.arc.resize(voxels);
+        sc.offset.resize(voxels);
+        sc.foot.resize(voxels);
+        sc.dirty.assign(blocks, 0);
+        sc.parts.resize(std::size_t(tables.parts()));
+        const openvdb::Coord bmin = brick.box.min(), bmax = brick.box.max();
+        std::uint64_t deposits = 0;
+        for (std::uint32_t s : spotsOf[b]) {
+            const SpotLine& L = lines[s];
+            const openvdb::Vec3f* P = &points[L.first];
+            if (++sc.generation == 0) { // wrapped: forget every stamp
+                std::fill(sc.stamp.begin(), sc.stamp.end(), 0);
+                sc.generation = 1;
+            }
+            const std::uint32_t gen = sc.generation;
+            sc.touched.clear();
+            // Nearest point of the line to voxel v, searched on the segments beside the sample
+            // that v's projection on the line's local direction at sample j points to.
+            // The voxel's nearest point on the line, near sample j: the voxel's projection on the
+            // local direction at j picks the sample jf, then the distance to the line through
+            // P_jf along its direction (samples are h apart, so this is the segment distance to
+            // within h²/8). All in float: positions are output index units.
+            const openvdb::Vec3f* T = &tangents[L.first];
+            for (int j = 0;; j = std::min(j + kCoarse, L.count - 1)) {
+                const openvdb::Vec3f c = P[j], dir = T[j];
+                const bool end = j == 0 || j == L.count - 1;
+                const float slab = 0.5f * float(kCoarse * h) + 0.5f, invH = float(1.0 / h);
+                const int x0 = std::max(bmin[0], int(std::ceil(c[0] - rho))), x1 = std::min(bmax[0], int(std::floor(c[0] + rho)));
+                for (int x = x0; x <= x1; ++x) {
+                    const float dx = float(x) - c[0], ry2 = float(rho * rho) - dx * dx;
+                    if (ry2 < 0) continue;
+                    const float ry = std::sqrt(ry2);
+                    const int y0 = std::max(bmin[1], int(std::ceil(c[1] - ry))), y1 = std::min(bmax[1], int(std::floor(c[1] + ry)));
+                    for (int y = y0; y <= y1; ++y) {
+                        const float dy = float(y) - c[1], rz2 = ry2 - dy * dy;
+                        if (rz2 < 0) continue;
+                        const float rz = std::sqrt(rz2);
+                        const int z0 = std::max(bmin[2], int(std::ceil(c[2] - rz))), z1 = std::min(bmax[2], int(std::floor(c[2] + rz)));
+                        const float pxy = dx * dir[0] + dy * dir[1];
+                        for (int z = z0; z <= z1; ++z) {
+                            const float along = pxy + (float(z) - c[2]) * dir[2];
+                            if (!end && std::abs(along) > slab) continue;
+                            const std::int64_t l = bi.localOf(openvdb::Coord(x, y, z));
+                            if (l < 0) continue;
+                            const int jf = std::clamp(j + int(std::floor(along * invH + 0.5f)), 0, L.count - 1);
+                            const openvdb::Vec3f w = openvdb::Vec3f(float(x), float(y), float(z)) - P[jf];
+                            const float a = w.dot(T[jf]);
+                            const float d2 = w.lengthSqr() - a * a;
+                            const std::size_t li = std::size_t(l);
+                            const bool fresh = sc.stamp[li] != gen;
+                            if (fresh || d2 < sc.best[li]) {
+                                if (fresh) sc.touched.push_back(l);
+                                sc.stamp[li] = gen;
+                                sc.best[li] = d2;
+                                sc.arc[li] = float(double(jf - L.centre) * h) + a;
+                                sc.offset[li] = w - T[jf] * a;
+                                sc.foot[li] = jf;
+                            }
+                        }
+                    }
+                }
+                if (j == L.count - 1) break;
+            }
+            const float weight = spots.weights[s];
+            // A spot within reach of where its line ends: part of it lies beyond the wall, where
+            // no window sample can see it; sum its windows directly instead of from the tables.
+            const bool nearWall = L.endFwd < reach + h || L.endBack > -(reach + h);
+            const Xform* G = &xforms[L.first];
+            const openvdb::Vec3d t0(L.tangent);
+            for (std::int64_t l : sc.touched) {
+                const std::size_t li = std::size_t(l);
+                if (double(sc.best[li]) >= (reach + 2.0) * (reach + 2.0)) continue;
+                // The voxel's offset carried back along the line to the spot (linearised flow
+                // map): where the voxel's own streamline passes the spot. Its part across the
+                // line is the distance that decides the footprint, its part along the line shifts
+                // the window.
+                const Xform& g = G[sc.foot[li]];
+                const openvdb::Vec3f& o = sc.offset[li];
+                const openvdb::Vec3d d0(g[0] * o[0] + g[3] * o[1] + g[6] * o[2], g[1] * o[0] + g[4] * o[1] + g[7] * o[2],
+                                        g[2] * o[0] + g[5] * o[1] + g[8] * o[2]);
+                const double along = d0.dot(t0);
+                const double d = std::sqrt(std::max(0.0, d0.lengthSqr() - along * along));
+                const double tau = double(sc.arc[li]) + along;
+                if (d >= reach || tau < tables.tauMin() || tau > tables.tauMax()) continue;
+                // x's window is cut where the spot's line ends at a wall: renormalise.
+                int i0 = win.lo, i1 = win.hi;
+                if (L.endBack > -1e299) i0 = std::max(i0, int(std::ceil((L.endBack - tau) / h - 1e-9)));
+                if (L.endFwd < 1e299) i1 = std::min(i1, int(std::floor((L.endFwd - tau) / h + 1e-9)));
+                if (i1 < i0) continue;
+                double inside = winTotal;
+                if (i0 != win.lo || i1 != win.hi) {
+                    inside = 0;
+                    for (int i = i0; i <= i1; ++i) inside += win.weight(i);
+                }
+                const std::size_t lb = li / V;
+                if (!sc.dirty[lb]) {
+                    sc.dirty[lb] = 1;
+                    std::fill_n(sc.acc.begin() + std::ptrdiff_t(lb * V * std::size_t(K)), V * std::size_t(K), 0.0f);
+                    std::fill_n(sc.nearest.begin() + std::ptrdiff_t(lb * V), V, std::numeric_limits<float>::max());
+                }
+                std::fill(sc.parts.begin(), sc.parts.end(), 0.0f);
+                if (nearWall) tables.addDirect(tau, d, weight, i0, i1, inside, sc.parts.data());
+                else tables.add(tau, d, float(double(weight) * winTotal / inside), sc.parts.data());
+                float* acc = &sc.acc[li * std::size_t(K)];
+                for (int p = 0; p < tables.parts(); ++p) acc[p] += sc.parts[std::size_t(p)];
+                if (settings.ripple && float(d) < sc.nearest[li]) {
+                    // The window's own ripple normalisation (Σ e^{iθi} / N over the samples inside),
+                    // from the nearest spot line: 0 for a whole window.
+                    sc.nearest[li] = float(d);
+                    const std::array<double, 2> nz = (i0 != win.lo || i1 != win.hi) ? rippleNorm(win, theta, i0, i1) : wholeNorm;
+                    acc[3 * C] = float(nz[0]);
+                    acc[3 * C + 1] = float(nz[1]);
+                }
+                ++deposits;
+            }
+        }
+        sc.stats.deposits += deposits;
+        // Hand the brick's blocks over, channel-major per block; untouched blocks are flagged.
+        sc.out.resize(brick.blocks.size() * std::size_t(K) * V);
+        sc.blockTouched.assign(brick.blocks.size(), 0);
+        bool any = false;
+        for (std::size_t i = 0; i < brick.blocks.size(); ++i) {
+            const std::uint32_t blk = brick.blocks[i];
+            const std::size_t lb = bi.localBlock(domain.blockOrigin(blk));
+            if (!sc.dirty[lb]) continue;
+            sc.blockTouched[i] = 1;
+            any = true;
+            float* dst = sc.out.data() + i * std::size_t(K) * V;
+            const float* src = sc.acc.data() + lb * V * std::size_t(K);
+            for (std::size_t off = 0; off < V; ++off)
+                for (int k = 0; k < K; ++k) dst[std::size_t(k) * V + off] = src[off * std::size_t(K) + std::size_t(k)];
+        }
+        if (any) sink(BrickChannels{brick.id, &brick, K, sc.out.data(), sc.blockTouched.data()});
+    };
+
+    std::vector<std::size_t> busy;
+    for (std::size_t b = 0; b < layout.size(); ++b) {
+        if (spotsOf[b].empty()) progress.advance(layout[b].activeVoxels); // nothing reaches it
+        else busy.push_back(b);
+    }
+    detail::runWithThreads(settings.threads, [&] {
+        tbb::parallel_for(
+            tbb::blocked_range<std::size_t>(0, busy.size(), 1),
+            [&](const tbb::blocked_range<std::size_t>& r) {
+                for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                    detail::checkCancel(progress);
+                    tbb::this_task_arena::isolate([&] { runBrick(busy[i]); });
+                    progress.advance(layout[busy[i]].activeVoxels);
+                }
+            },
+            tbb::simple_partitioner());
+    });
+    progress.end();
+
+    LicStats stats;
+    for (const SplatScratch& sc : scratch) stats.deposits += sc.stats.deposits;
+    stats.voxels = domain.activeVoxelCount();
+    stats.streamlines = spots.centers.size();
+    stats.samples = samples;
+    stats.bricks = busy.size();
+    stats.brickDim = dim;
+    stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return stats;
+}
+
+} // namespace lic

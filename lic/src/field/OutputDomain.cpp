@@ -1,0 +1,132 @@
+#include "lic/field/OutputDomain.h"
+
+#include "lic/util/Error.h"
+
+#include <tbb/parallel_for.h>
+
+#include <sstream>
+
+namespace lic {
+
+OutputDomain::OutputDomain(const VelocityField& field, int upsample)
+    : mUpsample(upsample)
+{
+    init(field.transform(), field.indexBBox(), field.grid());
+}
+
+OutputDomain::OutputDomain(const openvdb::math::Transform& fieldTransform, const openvdb::CoordBBox& fieldActiveBox,
+                           const openvdb::MaskGrid& activity, int upsample)
+    : mUpsample(upsample)
+{
+    init(fieldTransform, fieldActiveBox, activity);
+}
+
+template<typename GridT>
+void OutputDomain::init(const openvdb::math::Transform& fieldTransform, const openvdb::CoordBBox& fb,
+                        const GridT& grid)
+{
+    const int upsample = mUpsample;
+    if (upsample < 1 || upsample > 16) {
+        throw InputError("upsample " + std::to_string(upsample) + " is out of range; expected 1..16");
+    }
+    const int K = upsample;
+    mTransform = fieldTransform.copy();
+    mTransform->preTranslate(openvdb::Vec3d(0.5 / K - 0.5));
+    mTransform->preScale(1.0 / K);
+    mMap = AffineMap(*mTransform);
+    const openvdb::Vec3d vs = mTransform->voxelSize();
+    mVoxelSize = std::min({vs[0], vs[1], vs[2]});
+
+    mBBox = openvdb::CoordBBox(
+        openvdb::Coord(fb.min()[0] * K, fb.min()[1] * K, fb.min()[2] * K),
+        openvdb::Coord(fb.max()[0] * K + K - 1, fb.max()[1] * K + K - 1, fb.max()[2] * K + K - 1));
+    const openvdb::Coord dim = mBBox.dim();
+    const double total = double(dim[0]) * dim[1] * dim[2];
+    if (total > double(1ull << 31)) {
+        std::ostringstream msg;
+        msg << "output volume of " << dim[0] << "x" << dim[1] << "x" << dim[2]
+            << " voxels is too large (more than 2^31); lower --upsample or crop the field";
+        throw InputError(msg.str());
+    }
+
+    mBlockMin = openvdb::Coord(mBBox.min()[0] >> kLog2Block, mBBox.min()[1] >> kLog2Block,
+                               mBBox.min()[2] >> kLog2Block);
+    const openvdb::Coord blockMax(mBBox.max()[0] >> kLog2Block, mBBox.max()[1] >> kLog2Block,
+                                  mBBox.max()[2] >> kLog2Block);
+    for (int a = 0; a < 3; ++a) mBlockDim[a] = blockMax[a] - mBlockMin[a] + 1;
+    const std::size_t nBlocks = std::size_t(mBlockDim[0]) * mBlockDim[1] * mBlockDim[2];
+
+    auto originOf = [&](std::size_t b) {
+        const int bx = int(b / (std::size_t(mBlockDim[1]) * mBlockDim[2]));
+        const int by = int((b / mBlockDim[2]) % mBlockDim[1]);
+        const int bz = int(b % mBlockDim[2]);
+        return openvdb::Coord((mBlockMin[0] + bx) << kLog2Block, (mBlockMin[1] + by) << kLog2Block,
+                              (mBlockMin[2] + bz) << kLog2Block);
+    };
+    // Activity of every candidate block, in parallel; then number the active blocks in order.
+    std::vector<Mask> masks(nBlocks);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nBlocks), [&](const auto& r) {
+        auto acc = grid.getConstAccessor();
+        for (std::size_t b = r.begin(); b != r.end(); ++b) {
+            const openvdb::Coord origin = originOf(b);
+            for (int off = 0; off < kBlockVoxels; ++off) {
+                const openvdb::Coord ijk = origin + openvdb::Coord(off >> 6, (off >> 3) & 7, off & 7);
+                if (!mBBox.isInside(ijk)) continue;
+                const openvdb::Coord f(detail::floorDiv(ijk[0], K), detail::floorDiv(ijk[1], K), detail::floorDiv(ijk[2], K));
+                if (acc.isValueOn(f)) masks[b].set(std::size_t(off));
+            }
+        }
+    });
+    mBlockTable.assign(nBlocks, -1);
+    for (std::size_t b = 0; b < nBlocks; ++b) {
+        if (masks[b].none()) continue;
+        mBlockTable[b] = std::int64_t(mBlockOrigins.size());
+        mBlockOrigins.push_back(originOf(b));
+        mMasks.push_back(masks[b]);
+        mActiveVoxels += masks[b].count();
+    }
+}
+
+template<typename GridT>
+typename GridT::Ptr OutputDomain::makeGrid(const std::vector<typename GridT::ValueType>& slots,
+                                           const std::string& name,
+                                           const std::vector<std::uint8_t>* keep) const
+{
+    using LeafT = typename GridT::TreeType::LeafNodeType;
+    using ValueT = typename GridT::ValueType;
+    std::vector<LeafT*> leaves(blockCount(), nullptr);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blockCount()), [&](const auto& r) {
+        for (std::size_t b = r.begin(); b != r.end(); ++b) {
+            auto* leaf = new LeafT(mBlockOrigins[b], openvdb::zeroVal<ValueT>(), false);
+            const ValueT* src = slots.data() + b * kBlockVoxels;
+            const std::uint8_t* kept = keep ? keep->data() + b * kBlockVoxels : nullptr;
+            for (auto it = mMasks[b]._Find_first(); it < std::size_t(kBlockVoxels);
+                 it = mMasks[b]._Find_next(it)) {
+                if (!kept || kept[it]) leaf->setValueOn(openvdb::Index(it), src[it]);
+            }
+            if (leaf->isEmpty()) {
+                delete leaf;
+                leaf = nullptr;
+            }
+            leaves[b] = leaf;
+        }
+    });
+    auto grid = GridT::create(openvdb::zeroVal<ValueT>());
+    for (LeafT* leaf : leaves)
+        if (leaf) grid->tree().addLeaf(leaf);
+    grid->setTransform(mTransform->copy());
+    grid->setName(name);
+    if constexpr (std::is_floating_point_v<ValueT>) {
+        grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+    } else {
+        grid->setVectorType(openvdb::VEC_INVARIANT); // unit directions
+    }
+    return grid;
+}
+
+template openvdb::FloatGrid::Ptr OutputDomain::makeGrid<openvdb::FloatGrid>(
+    const std::vector<float>&, const std::string&, const std::vector<std::uint8_t>*) const;
+template openvdb::Vec3SGrid::Ptr OutputDomain::makeGrid<openvdb::Vec3SGrid>(
+    const std::vector<openvdb::Vec3s>&, const std::string&, const std::vector<std::uint8_t>*) const;
+
+} // namespace lic

@@ -1,0 +1,375 @@
+#include "lic/texture/Spots.h"
+
+#include "lic/engine/Splat.h"
+
+#include "lic/util/Error.h"
+#include "lic/texture/Noise.h"
+
+#include <algorithm>
+#include <numeric>
+
+namespace lic {
+
+using openvdb::Vec3d;
+
+const char* toString(SpotDistribution d)
+{
+    switch (d) {
+    case SpotDistribution::Regular: return "regular";
+    case SpotDistribution::Random: return "random";
+    case SpotDistribution::Jittered: return "jittered";
+    case SpotDistribution::Poisson: return "poisson";
+    }
+    return "?";
+}
+
+SpotDistribution spotDistributionFromString(const std::string& s)
+{
+    if (s == "regular") return SpotDistribution::Regular;
+    if (s == "random") return SpotDistribution::Random;
+    if (s == "jittered") return SpotDistribution::Jittered;
+    if (s == "poisson") return SpotDistribution::Poisson;
+    throw InputError("unknown spot distribution \"" + s + "\"; expected regular, random, jittered or poisson");
+}
+
+namespace {
+
+/// Uniform [0, 1) from a hash of (seed, stream, counter): a counter-based generator, so every
+/// draw is a pure function of its index.
+struct HashRng
+{
+    std::uint64_t seed;
+    int stream;
+    std::uint64_t counter = 0;
+    double next()
+    {
+        const std::uint64_t c = counter++;
+        const std::uint64_t h = hashCoord(seed, int(std::uint32_t(c)), int(std::uint32_t(c >> 32)), stream);
+        return double(h >> 11) * (1.0 / 9007199254740992.0);
+    }
+};
+
+double uniformAt(std::uint64_t seed, int i, int j, int k, int salt)
+{
+    return double(hashCoord(seed ^ (0xA5A5A5A5ull * std::uint64_t(salt + 1)), i, j, k) >> 11) *
+           (1.0 / 9007199254740992.0);
+}
+
+void checkCount(double count)
+{
+    if (count > double(1 << 26)) {
+        throw InputError("spot spacing is too small for this volume: it would place about " +
+                         std::to_string(std::uint64_t(count)) + " spots (limit 67 million); increase input.spacing");
+    }
+}
+
+/// Dense background grid for minimum-distance queries (Bridson): cells of edge r/√3 hold at most
+/// one accepted point each.
+class DiskGrid
+{
+public:
+    DiskGrid(const openvdb::BBoxd& box, double r) : mLo(box.min()), mR2(r * r), mCell(r / std::sqrt(3.0))
+    {
+        for (int a = 0; a < 3; ++a) mDim[a] = std::max(1, int(std::ceil((box.max()[a] - box.min()[a]) / mCell)) + 1);
+        const double cells = double(mDim[0]) * mDim[1] * mDim[2];
+        checkCount(cells / 8.0);
+        mCells.assign(std::size_t(cells), -1);
+    }
+    std::array<int, 3> cellOf(const Vec3d& p) const
+    {
+        std::array<int, 3> c;
+        for (int a = 0; a < 3; ++a) c[a] = std::clamp(int((p[a] - mLo[a]) / mCell), 0, mDim[a] - 1);
+        return c;
+    }
+    std::size_t index(const std::array<int, 3>& c) const
+    {
+        return (std::size_t(c[0]) * std::size_t(mDim[1]) + std::size_t(c[1])) * std::size_t(mDim[2]) + std::size_t(c[2]);
+    }
+    bool free(const Vec3d& p, const std::vector<Vec3d>& pts) const
+    {
+        const auto c = cellOf(p);
+        for (int x = std::max(0, c[0] - 2); x <= std::min(mDim[0] - 1, c[0] + 2); ++x)
+            for (int y = std::max(0, c[1] - 2); y <= std::min(mDim[1] - 1, c[1] + 2); ++y)
+                for (int z = std::max(0, c[2] - 2); z <= std::min(mDim[2] - 1, c[2] + 2); ++z) {
+                    const std::int64_t q = mCells[index({x, y, z})];
+                    if (q >= 0 && (pts[std::size_t(q)] - p).lengthSqr() < mR2) return false;
+                }
+        return true;
+    }
+    void insert(const Vec3d& p, std::int64_t id) { mCells[index(cellOf(p))] = id; }
+
+private:
+    Vec3d mLo;
+    double mR2, mCell;
+    std::array<int, 3> mDim{};
+    std::vector<std::int64_t> mCells;
+};
+
+std::vector<Vec3d> poissonDisk(const openvdb::BBoxd& box, double r, std::uint64_t seed)
+{
+    const Vec3d ext = box.extents();
+    checkCount(ext[0] * ext[1] * ext[2] / (r * r * r));
+    DiskGrid grid(box, r);
+    HashRng rng{seed, 0x5D};
+    std::vector<Vec3d> pts;
+    std::vector<std::size_t> active;
+    const Vec3d first(box.min()[0] + rng.next() * ext[0], box.min()[1] + rng.next() * ext[1],
+                      box.min()[2] + rng.next() * ext[2]);
+    pts.push_back(first);
+    grid.insert(first, 0);
+    active.push_back(0);
+    constexpr int kTries = 30;
+    while (!active.empty()) {
+        const std::size_t ai = std::min(active.size() - 1, std::size_t(rng.next() * double(active.size())));
+        const Vec3d p = pts[active[ai]];
+        bool placed = false;
+        for (int t = 0; t < kTries && !placed; ++t) {
+            // Uniform in the spherical shell r … 2r (by volume).
+            const double u = rng.next(), z = 2.0 * rng.next() - 1.0, phi = 2.0 * M_PI * rng.next();
+            const double rad = r * std::cbrt(1.0 + 7.0 * u);
+            const double s = std::sqrt(std::max(0.0, 1.0 - z * z));
+            const Vec3d q = p + rad * Vec3d(s * std::cos(phi), s * std::sin(phi), z);
+            if (!box.isInside(q) || !grid.free(q, pts)) continue;
+            grid.insert(q, std::int64_t(pts.size()));
+            active.push_back(pts.size());
+            pts.push_back(q);
+            placed = true;
+        }
+        if (!placed) {
+            active[ai] = active.back();
+            active.pop_back();
+        }
+    }
+    return pts;
+}
+
+} // namespace
+
+std::vector<Vec3d> placeSpots(const SpotPlacement& p, const openvdb::BBoxd& box)
+{
+    if (!(p.spacing > 0) || !std::isfinite(p.spacing)) throw InputError("spot spacing must be > 0");
+    const double d = p.spacing;
+    const Vec3d ext = box.extents();
+    checkCount(ext[0] * ext[1] * ext[2] / (d * d * d));
+    std::vector<Vec3d> out;
+    switch (p.distribution) {
+    case SpotDistribution::Regular:
+    case SpotDistribution::Jittered: {
+        const bool jitter = p.distribution == SpotDistribution::Jittered;
+        // Lattice cells that can contribute a point inside the box (jitter moves ≤ d/2).
+        int lo[3], hi[3];
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = int(std::floor(box.min()[a] / d)) - 1;
+            hi[a] = int(std::floor(box.max()[a] / d)) + 1;
+        }
+        for (int i = lo[0]; i <= hi[0]; ++i)
+            for (int j = lo[1]; j <= hi[1]; ++j)
+                for (int k = lo[2]; k <= hi[2]; ++k) {
+                    Vec3d c((i + 0.5) * d, (j + 0.5) * d, (k + 0.5) * d);
+                    if (jitter) {
+                        for (int a = 0; a < 3; ++a) c[a] += (uniformAt(p.seed, i, j, k, a) - 0.5) * p.jitter * d;
+                    }
+                    if (box.isInside(c)) out.push_back(c);
+                }
+        break;
+    }
+    case SpotDistribution::Random: {
+        const auto n = std::uint64_t(std::llround(ext[0] * ext[1] * ext[2] / (d * d * d)));
+        out.reserve(n);
+        for (std::uint64_t s = 0; s < n; ++s) {
+            Vec3d c;
+            for (int a = 0; a < 3; ++a)
+                c[a] = box.min()[a] + uniformAt(p.seed, int(std::uint32_t(s)), int(s >> 32), 0x7A, a) * ext[a];
+            out.push_back(c);
+        }
+        break;
+    }
+    case SpotDistribution::Poisson: out = poissonDisk(box, kPoissonRadius * d, p.seed); break;
+    }
+    return out;
+}
+
+std::vector<Vec3d> selectEvenly(const std::vector<Vec3d>& candidates, double minDistance, std::uint64_t seed)
+{
+    if (candidates.empty()) return {};
+    openvdb::BBoxd box(candidates.front(), candidates.front());
+    for (const auto& c : candidates) box.expand(c);
+    DiskGrid grid(box, minDistance);
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> order(candidates.size());
+    for (std::size_t i = 0; i < candidates.size(); ++i)
+        order[i] = {hashCoord(seed, int(std::uint32_t(i)), int(i >> 32), 0x5E), std::uint32_t(i)};
+    std::sort(order.begin(), order.end());
+    std::vector<Vec3d> out;
+    for (const auto& [h, i] : order) {
+        const Vec3d& c = candidates[i];
+        if (!grid.free(c, out)) continue;
+        grid.insert(c, std::int64_t(out.size()));
+        out.push_back(c);
+    }
+    return out;
+}
+
+SpotStats spotStatistics(const std::vector<Vec3d>& spots, const openvdb::BBoxd& box, double spacing,
+                         std::uint64_t seed, int probes)
+{
+    SpotStats st;
+    st.count = spots.size();
+    if (spots.size() < 2) return st;
+    // Nearest neighbours through buckets of edge d, searching ±2 buckets (distances < 2d are exact;
+    // a spot with no neighbour that close counts 2d).
+    const double cell = spacing;
+    std::array<int, 3> dim;
+    for (int a = 0; a < 3; ++a) dim[a] = std::max(1, int(std::ceil(box.extents()[a] / cell)) + 1);
+    auto cellOf = [&](const Vec3d& p) {
+        std::array<int, 3> c;
+        for (int a = 0; a < 3; ++a) c[a] = std::clamp(int((p[a] - box.min()[a]) / cell), 0, dim[a] - 1);
+        return c;
+    };
+    auto idx = [&](int x, int y, int z) { return (std::size_t(x) * dim[1] + std::size_t(y)) * dim[2] + std::size_t(z); };
+    const std::size_t nBuckets = std::size_t(dim[0]) * std::size_t(dim[1]) * std::size_t(dim[2]);
+    std::vector<std::vector<std::uint32_t>> buckets(nBuckets);
+    for (std::size_t i = 0; i < spots.size(); ++i) {
+        const auto c = cellOf(spots[i]);
+        buckets[idx(c[0], c[1], c[2])].push_back(std::uint32_t(i));
+    }
+    double minD2 = 1e300, sumNearest = 0;
+    for (std::size_t i = 0; i < spots.size(); ++i) {
+        const auto c = cellOf(spots[i]);
+        double best = 4.0 * spacing * spacing;
+        for (int x = std::max(0, c[0] - 2); x <= std::min(dim[0] - 1, c[0] + 2); ++x)
+            for (int y = std::max(0, c[1] - 2); y <= std::min(dim[1] - 1, c[1] + 2); ++y)
+                for (int z = std::max(0, c[2] - 2); z <= std::min(dim[2] - 1, c[2] + 2); ++z)
+                    for (std::uint32_t j : buckets[idx(x, y, z)])
+                        if (j != i) best = std::min(best, (spots[j] - spots[i]).lengthSqr());
+        minD2 = std::min(minD2, best);
+        sumNearest += std::sqrt(best);
+    }
+    st.minDistance = std::sqrt(minD2);
+    st.meanNearest = sumNearest / double(spots.size());
+
+    // Disc probes: centre inside the box shrunk by the disc radius, so each disc is fully inside.
+    const double rho = 4.0 * spacing;
+    const Vec3d lo = box.min() + Vec3d(rho), hi = box.max() - Vec3d(rho);
+    if (!(hi[0] > lo[0] && hi[1] > lo[1] && hi[2] > lo[2])) return st;
+    HashRng rng{seed, 0x57};
+    auto cov = [](const std::vector<double>& counts) {
+        double m = 0, v = 0;
+        for (double c : counts) m += c;
+        m /= double(counts.size());
+        for (double c : counts) v += (c - m) * (c - m);
+        v /= double(counts.size());
+        return m > 0 ? std::sqrt(v) / m : 0.0;
+    };
+    auto count = [&](const Vec3d& centre, const Vec3d& n, double halfThick) {
+        double c = 0;
+        for (const auto& s : spots) {
+            const Vec3d r = s - centre;
+            const double h = r.dot(n);
+            if (std::abs(h) >= halfThick) continue;
+            if ((r - h * n).lengthSqr() < rho * rho) c += 1;
+        }
+        return c;
+    };
+    std::vector<double> tilted, axis;
+    std::size_t empty = 0;
+    for (int p = 0; p < probes; ++p) {
+        const Vec3d centre(lo[0] + rng.next() * (hi[0] - lo[0]), lo[1] + rng.next() * (hi[1] - lo[1]),
+                           lo[2] + rng.next() * (hi[2] - lo[2]));
+        const double z = 2.0 * rng.next() - 1.0, phi = 2.0 * M_PI * rng.next();
+        const double s = std::sqrt(std::max(0.0, 1.0 - z * z));
+        tilted.push_back(count(centre, Vec3d(s * std::cos(phi), s * std::sin(phi), z), 0.25 * spacing));
+        Vec3d n(0.0);
+        n[std::min(2, int(rng.next() * 3.0))] = 1.0;
+        axis.push_back(count(centre, n, 0.125 * spacing));
+        if (axis.back() == 0) ++empty;
+    }
+    st.planeCov = cov(tilted);
+    st.axisPlaneCov = cov(axis);
+    st.emptyAxisFraction = double(empty) / double(probes);
+    return st;
+}
+
+double spotPeak(const LicSettings& settings, double radius)
+{
+    const int n = settings.halfSamples();
+    const double h = settings.step;
+    const int reach = int(std::ceil((radius + 1.0) / h)) + 1;
+    const int M = 2 * n + reach + 2;
+    const std::size_t N = std::size_t(2 * M + 1);
+    std::vector<double> vals(N), win(N), norm(N), scratch;
+    double peak = 0.0;
+    for (double phase : {0.0, 0.25, 0.5, 0.75}) {
+        for (std::size_t j = 0; j < N; ++j) {
+            double slope;
+            vals[j] = spotProfile(std::abs((double(j) - M + phase) * h), radius, slope);
+        }
+        detail::windowSums(settings.kernel, settings.decay, n, N, 1, vals.data(), win.data(), norm.data(), scratch);
+        // Interior windows only (complete on both sides).
+        for (std::size_t i = std::size_t(n); i + std::size_t(n) < N; ++i) peak = std::max(peak, win[i] / norm[i]);
+    }
+    return peak;
+}
+
+namespace {
+/// Call fn(texture) with the K-level spot texture, K = radii.size() in [1, 4].
+template<typename Fn>
+auto withSpotTexture(const SpotSet& spots, const std::vector<double>& radii, double haloScale, Fn&& fn)
+{
+    auto run = [&]<int K>() {
+        std::array<double, K> r{};
+        std::copy(radii.begin(), radii.end(), r.begin());
+        const SpotTexture<K> texture(spots, r, haloScale);
+        return fn(texture);
+    };
+    switch (radii.size()) {
+    case 1: return run.template operator()<1>();
+    case 2: return run.template operator()<2>();
+    case 3: return run.template operator()<3>();
+    case 4: return run.template operator()<4>();
+    default:
+        throw InputError("input.radii has " + std::to_string(radii.size()) +
+                         " radii; between 1 and 4 width levels are supported");
+    }
+}
+} // namespace
+
+LicResult convolveSpots(const VelocityField& field, const OutputDomain& domain, const SpotSet& spots,
+                        const std::vector<double>& radii, double haloScale, const LicSettings& settings,
+                        Progress& progress)
+{
+    if (settings.engine == EngineType::Splat) {
+        settings.validate();
+        const BrickLayout layout(domain, detail::brickDim(settings));
+        const int C = 2 * int(radii.size()), K = settings.ripple ? 3 * C + 2 : C;
+        LicResult result;
+        result.channels.assign(std::size_t(K), std::vector<float>(domain.slotCount(), 0.0f));
+        result.stats = splatSpotBricks(field, domain, layout, spots, radii, haloScale, settings, progress,
+                                       [&](const BrickChannels& bc) {
+                                           for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i) {
+                                               if (bc.blockTouched && !bc.blockTouched[i]) continue;
+                                               const std::size_t slot0 = std::size_t(bc.brick->blocks[i]) * OutputDomain::kBlockVoxels;
+                                               for (int c = 0; c < K; ++c)
+                                                   std::copy_n(bc.block(i, c), OutputDomain::kBlockVoxels,
+                                                               result.channels[std::size_t(c)].begin() + std::ptrdiff_t(slot0));
+                                           }
+                                       });
+        return result;
+    }
+    return withSpotTexture(spots, radii, haloScale,
+                           [&](const auto& texture) { return convolve(field, domain, texture, settings, progress); });
+}
+
+LicStats convolveSpotBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
+                            const SpotSet& spots, const std::vector<double>& radii, double haloScale,
+                            const LicSettings& settings, Progress& progress, const BrickSink& sink)
+{
+    if (settings.engine == EngineType::Splat)
+        return splatSpotBricks(field, domain, layout, spots, radii, haloScale, settings, progress, sink);
+    return withSpotTexture(spots, radii, haloScale, [&](const auto& texture) {
+        using Texture = std::remove_cvref_t<decltype(texture)>;
+        return convolveBricks(
+            field, domain, layout, [&](const Brick&) -> const Texture& { return texture; }, settings, progress, sink);
+    });
+}
+
+} // namespace lic

@@ -1,0 +1,719 @@
+#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/VdbCheck.h"
+#include "vdbexport/io/Sha256.h"
+
+#include <lic/util/Error.h>
+
+#include <openvdb/Exceptions.h>
+#include <openvdb/io/GridDescriptor.h>
+#include <openvdb/tools/Interpolation.h>
+#include <openvdb/tree/LeafManager.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <set>
+#include <system_error>
+#include <tuple>
+
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+
+namespace vdbexport {
+
+namespace {
+
+std::string quote(const std::string& s) { return "'" + s + "'"; }
+
+std::string cleanMessage(const char* what);
+
+/// Run `fn`, turning any exception other than lic::Error into a lic::InputError that names
+/// the file and what was being done (OpenVDB reports corrupt and truncated files as IoError,
+/// RuntimeError, KeyError, … and sometimes as std::exception).
+template<typename Fn>
+auto guardRead(const std::string& path, const char* what, Fn&& fn) -> decltype(fn())
+{
+    try {
+        return fn();
+    } catch (const lic::Error&) {
+        throw;
+    } catch (const std::exception& e) { // openvdb::Exception is a std::exception
+        throw lic::InputError("cannot read " + quote(path) + " (" + what + "): " + cleanMessage(e.what())
+                              + "; expected an intact OpenVDB .vdb file (corrupt or truncated?)");
+    }
+}
+
+/// Copy name, class, metadata and transform of `src` onto `dst`.
+void copyGridAttributes(const openvdb::GridBase& src, openvdb::GridBase& dst)
+{
+    static_cast<openvdb::MetaMap&>(dst) = static_cast<const openvdb::MetaMap&>(src);
+    dst.setTransform(src.constTransform().copy());
+}
+
+/// A value converted to another value type (double → float, Vec3d → Vec3s, Vec3i → Vec3s).
+/// OpenVDB's value-converting tree constructor refuses Vec3d → Vec3s, so convert by hand.
+template<typename DstV, typename SrcV>
+DstV convertValue(const SrcV& v)
+{
+    if constexpr (openvdb::VecTraits<SrcV>::IsVec) {
+        using E = typename openvdb::VecTraits<DstV>::ElementType;
+        return DstV(static_cast<E>(v[0]), static_cast<E>(v[1]), static_cast<E>(v[2]));
+    } else {
+        return static_cast<DstV>(v);
+    }
+}
+
+/// A copy of `src` with another value type: same topology, every voxel and tile value (active
+/// or not) converted, and the same name, class, metadata and transform.
+template<typename DstGridT, typename SrcGridT>
+typename DstGridT::Ptr convertGrid(const SrcGridT& src)
+{
+    using DstTreeT = typename DstGridT::TreeType;
+    using DstV = typename DstGridT::ValueType;
+    auto tree = std::make_shared<DstTreeT>(src.tree(), convertValue<DstV>(src.background()),
+                                           openvdb::TopologyCopy());
+    // Leaf voxels, in parallel.
+    openvdb::tree::LeafManager<DstTreeT> leaves(*tree);
+    leaves.foreach([&](typename DstTreeT::LeafNodeType& leaf, std::size_t) {
+        const auto* srcLeaf = src.tree().probeConstLeaf(leaf.origin());
+        if (!srcLeaf) return;
+        for (openvdb::Index i = 0; i < DstTreeT::LeafNodeType::SIZE; ++i)
+            leaf.setValueOnly(i, convertValue<DstV>(srcLeaf->getValue(i)));
+    });
+    // Tiles of the root and internal nodes.
+    auto srcAcc = src.getConstAccessor();
+    auto it = tree->beginValueAll();
+    it.setMaxDepth(DstTreeT::RootNodeType::LEVEL - 1);
+    for (; it; ++it) it.setValue(convertValue<DstV>(srcAcc.getValue(it.getCoord())));
+
+    auto dst = DstGridT::create(tree);
+    copyGridAttributes(src, *dst);
+    return dst;
+}
+
+/// An exception message fit to quote: control characters and runs of blanks collapsed (OpenVDB
+/// echoes garbage read from damaged files), at most 200 characters.
+std::string cleanMessage(const char* what)
+{
+    std::string out;
+    for (const char* c = what; *c && out.size() < 200; ++c) {
+        const bool blank = std::isspace(static_cast<unsigned char>(*c)) || std::iscntrl(static_cast<unsigned char>(*c));
+        if (blank && (out.empty() || out.back() == ' ')) continue;
+        out.push_back(blank ? ' ' : *c);
+    }
+    if (out.size() >= 200) out += "...";
+    return out;
+}
+
+openvdb::Vec3SGrid::Ptr toVec3S(const openvdb::GridBase::Ptr& grid)
+{
+    if (auto g = openvdb::gridPtrCast<openvdb::Vec3SGrid>(grid)) return g;
+    if (auto g = openvdb::gridConstPtrCast<openvdb::Vec3DGrid>(grid))
+        return convertGrid<openvdb::Vec3SGrid>(*g);
+    if (auto g = openvdb::gridConstPtrCast<openvdb::Vec3IGrid>(grid))
+        return convertGrid<openvdb::Vec3SGrid>(*g);
+    return nullptr;
+}
+
+openvdb::FloatGrid::Ptr toFloat(const openvdb::GridBase::Ptr& grid)
+{
+    if (auto g = openvdb::gridPtrCast<openvdb::FloatGrid>(grid)) return g;
+    if (auto g = openvdb::gridConstPtrCast<openvdb::DoubleGrid>(grid))
+        return convertGrid<openvdb::FloatGrid>(*g);
+    return nullptr;
+}
+
+/// The grid types whose tiles writeVdbAtomic voxelizes (point grids are left alone).
+using VoxelizableGridTypes = openvdb::NumericGridTypes::Append<openvdb::Vec3GridTypes>::Append<
+    openvdb::BoolGrid, openvdb::MaskGrid>;
+
+} // namespace
+
+// ------------------------------------------------------------------------------------------
+// detail
+
+namespace detail {
+
+/// Check that `path` names a file we may create: its directory exists and is writable, and
+/// `path` itself is not a directory. Returns the temporary name to write first.
+std::string prepareAtomicWrite(const std::string& path)
+{
+    if (path.empty()) throw lic::InputError("cannot write a file with an empty path; expected a file name");
+    const fs::path p(path);
+    fs::path dir = p.parent_path();
+    if (dir.empty()) dir = ".";
+    std::error_code ec;
+    if (!fs::exists(dir, ec))
+        throw lic::InputError("cannot write " + quote(path) + ": directory " + quote(dir.string())
+                              + " does not exist; create it first or choose another output path");
+    if (!fs::is_directory(dir, ec))
+        throw lic::InputError("cannot write " + quote(path) + ": " + quote(dir.string())
+                              + " is not a directory; expected an existing directory");
+    if (::access(dir.c_str(), W_OK) != 0)
+        throw lic::InputError("cannot write " + quote(path) + ": directory " + quote(dir.string())
+                              + " is not writable (" + std::strerror(errno) + ")");
+    if (fs::is_directory(p, ec))
+        throw lic::InputError("cannot write " + quote(path)
+                              + ": it is a directory; expected a file path");
+    return path + ".tmp-" + std::to_string(::getpid());
+}
+
+/// Flush `tmp` to disk, then rename it over `path`. Removes `tmp` and throws lic::Error on failure.
+void commitAtomicWrite(const std::string& tmp, const std::string& path)
+{
+    std::error_code ec;
+    const int fd = ::open(tmp.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0 || ::fsync(fd) != 0) {
+        const std::string reason = std::strerror(errno);
+        if (fd >= 0) ::close(fd);
+        fs::remove(tmp, ec);
+        throw lic::Error("cannot write " + quote(path) + ": flushing " + quote(tmp) + " failed ("
+                         + reason + ")");
+    }
+    ::close(fd);
+    fs::rename(tmp, path, ec);
+    if (ec) {
+        const std::string reason = ec.message();
+        fs::remove(tmp, ec);
+        throw lic::Error("cannot write " + quote(path) + ": renaming " + quote(tmp) + " failed ("
+                         + reason + ")");
+    }
+}
+
+
+VdbReader::VdbReader(std::string path) : mPath(std::move(path))
+{
+    openvdb::initialize();
+    if (mPath.empty()) throw lic::InputError("no .vdb file given; expected a path to a .vdb file");
+    std::error_code ec;
+    const fs::path p(mPath);
+    const auto status = fs::status(p, ec);
+    if (!fs::exists(status))
+        throw lic::InputError("file " + quote(mPath) + " not found; expected a .vdb file");
+    if (fs::is_directory(status))
+        throw lic::InputError(quote(mPath) + " is a directory; expected a .vdb file");
+    const auto size = fs::file_size(p, ec);
+    if (!ec && size == 0)
+        throw lic::InputError("file " + quote(mPath) + " is empty (0 bytes); expected a .vdb file");
+    if (!std::ifstream(mPath, std::ios::binary))
+        throw lic::InputError("cannot open " + quote(mPath) + " for reading (" + std::strerror(errno)
+                              + "); expected a readable .vdb file");
+    try {
+        mCheck = checkedVdb(mPath);
+    } catch (const lic::Error&) {
+        throw;
+    } catch (const std::exception& e) {
+        throw lic::InputError("cannot read " + quote(mPath) + ": " + cleanMessage(e.what()));
+    }
+    mFile = std::make_unique<openvdb::io::File>(mPath);
+    try {
+        mFile->open(/*delayLoad=*/false);
+    } catch (const std::exception& e) {
+        const std::string msg = cleanMessage(e.what());
+        if (msg.find("not a VDB file") != std::string::npos)
+            throw lic::InputError(quote(mPath) + " is not an OpenVDB file (no VDB header); "
+                                  "expected a .vdb file");
+        throw lic::InputError("cannot open " + quote(mPath) + " as a .vdb file: " + msg
+                              + "; expected an intact OpenVDB .vdb file (corrupt or truncated?)");
+    }
+}
+
+VdbReader::~VdbReader()
+{
+    try {
+        if (mFile && mFile->isOpen()) mFile->close();
+    } catch (...) {
+    }
+}
+
+std::vector<std::pair<std::string, std::string>> VdbReader::gridTypes()
+{
+    return guardRead(mPath, "reading grid headers", [&] {
+        std::vector<std::pair<std::string, std::string>> out;
+        const auto grids = mFile->readAllGridMetadata();
+        for (const auto& g : *grids) out.emplace_back(g->getName(), g->valueType());
+        return out;
+    });
+}
+
+openvdb::GridBase::Ptr VdbReader::readGrid(const std::string& name)
+{
+    const std::string what = "reading grid " + quote(name);
+    return guardRead(mPath, what.c_str(), [&] {
+        for (const auto& g : mCheck.grids)
+            if (g.name == name && !g.skipReason.empty())
+                throw lic::InputError("grid " + quote(name) + " in " + quote(mPath) + " (" + g.gridType
+                                      + ") cannot be read: " + g.skipReason);
+        if (!mFile->hasGrid(name))
+            throw lic::InputError("grid " + quote(name) + " not found in " + quote(mPath)
+                                  + "; the file has: " + listGrids(gridTypes()));
+        auto grid = mFile->readGrid(name);
+        if (!grid) throw lic::InputError("grid " + quote(name) + " in " + quote(mPath) + " could not be read");
+        return grid;
+    });
+}
+
+openvdb::GridPtrVec VdbReader::readAllGrids()
+{
+    return guardRead(mPath, "reading grids", [&] {
+        const bool skipped = std::any_of(mCheck.grids.begin(), mCheck.grids.end(),
+                                         [](const VdbGridCheck& g) { return !g.skipReason.empty(); });
+        if (!skipped) {
+            const auto grids = mFile->getGrids();
+            return grids ? *grids : openvdb::GridPtrVec{};
+        }
+        openvdb::GridPtrVec grids; // grids of types licvdb does not read are left out
+        for (const auto& g : mCheck.grids)
+            if (g.skipReason.empty()) grids.push_back(mFile->readGrid(g.name));
+        return grids;
+    });
+}
+
+openvdb::MetaMap::Ptr VdbReader::fileMetadata()
+{
+    return guardRead(mPath, "reading file metadata", [&] {
+        auto meta = mFile->getMetadata();
+        return meta ? meta : std::make_shared<openvdb::MetaMap>();
+    });
+}
+
+namespace {
+
+/// Files that passed checkedVdb, keyed by what identifies an unchanged file.
+struct FileKey
+{
+    dev_t dev;
+    ino_t ino;
+    off_t size;
+    int64_t mtimeNs;
+    bool operator<(const FileKey& o) const
+    {
+        return std::tie(dev, ino, size, mtimeNs) < std::tie(o.dev, o.ino, o.size, o.mtimeNs);
+    }
+};
+
+std::mutex sCheckedMutex;
+std::map<FileKey, VdbCheckResult> sChecked;
+
+bool fileKey(const std::string& path, FileKey& key)
+{
+    struct stat st{};
+    if (::stat(path.c_str(), &st) != 0) return false;
+    key = {st.st_dev, st.st_ino, st.st_size, int64_t(st.st_mtim.tv_sec) * 1000000000 + st.st_mtim.tv_nsec};
+    return true;
+}
+
+} // namespace
+
+VdbCheckResult checkedVdb(const std::string& path)
+{
+    FileKey before{};
+    const bool known = fileKey(path, before);
+    if (known) {
+        const std::lock_guard<std::mutex> lock(sCheckedMutex);
+        if (const auto it = sChecked.find(before); it != sChecked.end()) return it->second;
+    }
+    VdbCheckResult result = checkVdbStructure(path);
+    checkInIsolatedProcess(path);
+    FileKey after{};
+    if (known && fileKey(path, after) && !(before < after) && !(after < before)) {
+        const std::lock_guard<std::mutex> lock(sCheckedMutex);
+        sChecked[after] = result;
+    }
+    return result;
+}
+
+void clearCheckedVdbCache()
+{
+    const std::lock_guard<std::mutex> lock(sCheckedMutex);
+    sChecked.clear();
+}
+
+std::string listGrids(const std::vector<std::pair<std::string, std::string>>& grids)
+{
+    if (grids.empty()) return "no grids";
+    std::string s;
+    for (const auto& [name, type] : grids) {
+        if (!s.empty()) s += ", ";
+        s += (name.empty() ? std::string("(unnamed)") : name) + " (" + type + ")";
+    }
+    return s;
+}
+
+bool isVec3Type(const std::string& valueType)
+{
+    return valueType == openvdb::typeNameAsString<openvdb::Vec3s>()
+        || valueType == openvdb::typeNameAsString<openvdb::Vec3d>()
+        || valueType == openvdb::typeNameAsString<openvdb::Vec3i>();
+}
+
+} // namespace detail
+
+// ------------------------------------------------------------------------------------------
+// reading
+
+namespace {
+
+bool isScalarType(const std::string& t)
+{
+    return t == openvdb::typeNameAsString<float>() || t == openvdb::typeNameAsString<double>();
+}
+
+/// The base name `b` for which `b.x`, `b.y`, `b.z` (or `b_x`…) are all scalar grids of the file,
+/// preferring `velocity`, `vel`, `v`; "" if there is none. `sep` receives the separator.
+std::string findSplitBase(const std::vector<std::pair<std::string, std::string>>& grids, const std::string& only,
+                          std::string& sep)
+{
+    const auto has = [&](const std::string& n) {
+        return std::any_of(grids.begin(), grids.end(), [&](const auto& g) { return g.first == n && isScalarType(g.second); });
+    };
+    std::vector<std::string> candidates;
+    if (!only.empty()) candidates.push_back(only);
+    else {
+        for (const char* n : kDefaultVelocityNames) candidates.emplace_back(n);
+        for (const auto& g : grids)
+            if (g.first.size() > 2 && (g.first.compare(g.first.size() - 2, 2, ".x") == 0 || g.first.compare(g.first.size() - 2, 2, "_x") == 0))
+                candidates.push_back(g.first.substr(0, g.first.size() - 2));
+    }
+    for (const auto& b : candidates)
+        for (const char* sp : {".", "_"})
+            if (has(b + sp + "x") && has(b + sp + "y") && has(b + sp + "z")) {
+                sep = sp;
+                return b;
+            }
+    return "";
+}
+
+/// One Vec3 grid from three scalar component grids (Houdini's split `vel.x`, `vel.y`, `vel.z`).
+/// The result has the x grid's transform and the union of the three active regions; each
+/// component is sampled trilinearly at the result's voxel centres in world space, so component
+/// grids offset by half a voxel (face-centred, MAC style) are handled too.
+openvdb::Vec3SGrid::Ptr combineSplit(detail::VdbReader& reader, const std::string& base, const std::string& sep)
+{
+    openvdb::FloatGrid::Ptr comp[3];
+    for (int a = 0; a < 3; ++a) {
+        comp[a] = toFloat(reader.readGrid(base + sep + "xyz"[a]));
+        if (!comp[a]) throw lic::InputError("grid " + quote(base + sep + "xyz"[a]) + " in " + quote(reader.path()) + " is not a scalar grid");
+        if (!comp[a]->transform().isLinear())
+            throw lic::InputError("grid " + quote(base + sep + "xyz"[a]) + " in " + quote(reader.path()) + " has a non-linear transform");
+    }
+    auto out = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+    out->setTransform(comp[0]->transform().copy());
+    out->setName(base);
+    out->setVectorType(openvdb::VEC_CONTRAVARIANT_RELATIVE);
+    const bool sameXform = comp[1]->transform() == comp[0]->transform() && comp[2]->transform() == comp[0]->transform();
+    for (int a = 0; a < 3; ++a) {
+        if (sameXform) {
+            out->tree().topologyUnion(comp[a]->tree());
+        } else {
+            const openvdb::CoordBBox bb = comp[a]->evalActiveVoxelBoundingBox();
+            if (bb.empty()) continue;
+            const openvdb::BBoxd w = comp[a]->transform().indexToWorld(bb);
+            const openvdb::Vec3d lo = out->worldToIndex(w.min()), hi = out->worldToIndex(w.max());
+            out->tree().sparseFill(openvdb::CoordBBox(openvdb::Coord::round(openvdb::math::minComponent(lo, hi)),
+                                                      openvdb::Coord::round(openvdb::math::maxComponent(lo, hi))),
+                                   openvdb::Vec3s(0.0f), true);
+        }
+    }
+    out->tree().voxelizeActiveTiles();
+    using Sampler = openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler>;
+    openvdb::FloatGrid::ConstAccessor acc[3] = {comp[0]->getConstAccessor(), comp[1]->getConstAccessor(), comp[2]->getConstAccessor()};
+    for (auto it = out->tree().beginValueOn(); it; ++it) {
+        openvdb::Vec3s v;
+        for (int a = 0; a < 3; ++a) {
+            if (sameXform) v[a] = acc[a].getValue(it.getCoord());
+            else v[a] = Sampler(acc[a], comp[a]->transform()).wsSample(out->indexToWorld(it.getCoord()));
+        }
+        it.setValue(v);
+    }
+    return out;
+}
+
+} // namespace
+
+openvdb::Vec3SGrid::Ptr readVelocityGrid(const std::string& path, const std::string& name,
+                                         std::string* chosenName)
+{
+    detail::VdbReader reader(path);
+    const auto grids = reader.gridTypes();
+    const auto find = [&](const std::string& n) {
+        return std::find_if(grids.begin(), grids.end(), [&](const auto& g) { return g.first == n; });
+    };
+
+    std::string chosen;
+    if (!name.empty()) {
+        const auto it = find(name);
+        if (it == grids.end()) {
+            std::string sep;
+            if (!findSplitBase(grids, name, sep).empty()) {
+                if (chosenName) *chosenName = name;
+                return combineSplit(reader, name, sep);
+            }
+            throw lic::InputError("grid " + quote(name) + " not found in " + quote(path)
+                                  + "; the file has: " + detail::listGrids(grids));
+        }
+        if (!detail::isVec3Type(it->second))
+            throw lic::InputError("grid " + quote(name) + " in " + quote(path) + " is a " + it->second
+                                  + " grid; a " + it->second + " grid cannot be a velocity field "
+                                  "(expected a Vec3 grid: vec3s, vec3d or vec3i)");
+        chosen = name;
+    } else {
+        for (const char* candidate : kDefaultVelocityNames) {
+            const auto it = find(candidate);
+            if (it != grids.end() && detail::isVec3Type(it->second)) {
+                chosen = candidate;
+                break;
+            }
+        }
+        if (chosen.empty()) {
+            std::vector<std::pair<std::string, std::string>> vec3;
+            for (const auto& g : grids)
+                if (detail::isVec3Type(g.second)) vec3.push_back(g);
+            std::string sep;
+            const std::string split = vec3.empty() ? findSplitBase(grids, "", sep) : "";
+            if (!split.empty()) {
+                if (chosenName) *chosenName = split;
+                return combineSplit(reader, split, sep);
+            }
+            if (vec3.empty())
+                throw lic::InputError(quote(path) + " has no Vec3 grid to use as a velocity field; "
+                                      "the file has: " + detail::listGrids(grids)
+                                      + "; expected a vec3s, vec3d or vec3i grid");
+            if (vec3.size() > 1)
+                throw lic::InputError(quote(path) + " has several Vec3 grids and none is named "
+                                      "'velocity', 'vel' or 'v': " + detail::listGrids(vec3)
+                                      + "; pass --grid NAME to choose one");
+            chosen = vec3.front().first;
+        }
+    }
+
+    auto grid = toVec3S(reader.readGrid(chosen));
+    if (!grid)
+        throw lic::InputError("grid " + quote(chosen) + " in " + quote(path)
+                              + " could not be read as a Vec3 grid");
+    if (chosenName) *chosenName = chosen;
+    return grid;
+}
+
+std::map<std::string, openvdb::FloatGrid::Ptr> readScalarGrids(const std::string& path)
+{
+    detail::VdbReader reader(path);
+    std::map<std::string, openvdb::FloatGrid::Ptr> out;
+    for (const auto& [name, type] : reader.gridTypes()) {
+        if (type != openvdb::typeNameAsString<float>() && type != openvdb::typeNameAsString<double>())
+            continue;
+        if (out.count(name)) continue; // duplicate name: the first one wins, as in readGrid
+        if (auto grid = toFloat(reader.readGrid(name))) out.emplace(name, std::move(grid));
+    }
+    return out;
+}
+
+// ------------------------------------------------------------------------------------------
+// writing
+
+// ---- OutputSet ---------------------------------------------------------------------------
+
+namespace {
+
+std::string fdPath(int fd) { return "/proc/self/fd/" + std::to_string(fd); }
+
+} // namespace
+
+OutputSet::~OutputSet()
+{
+    for (auto& f : mFiles) discard(f);
+}
+
+void OutputSet::discard(Staged& f)
+{
+    if (f.fd >= 0) ::close(f.fd);
+    f.fd = -1;
+    if (!f.named.empty()) {
+        std::error_code ec;
+        fs::remove(f.named, ec);
+        f.named.clear();
+    }
+}
+
+OutputSet::Staged OutputSet::stage(const std::string& path)
+{
+    for (const auto& f : mFiles)
+        if (f.path == path) throw lic::Error("cannot write " + quote(path) + " twice in one output set");
+    Staged f;
+    f.path = path;
+    const std::string named = detail::prepareAtomicWrite(path);
+    fs::path dir = fs::path(path).parent_path();
+    if (dir.empty()) dir = ".";
+    // An unnamed file in the target directory: a process killed before commit() leaves nothing.
+    f.fd = ::open(dir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0666);
+    if (f.fd < 0) f.named = named; // no O_TMPFILE on this file system: a named temporary
+    return f;
+}
+
+std::string OutputSet::target(const Staged& f) { return f.fd >= 0 ? fdPath(f.fd) : f.named; }
+
+void OutputSet::finish(Staged& f)
+{
+    const int fd = f.fd >= 0 ? f.fd : ::open(f.named.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0 || ::fsync(fd) != 0) {
+        const std::string reason = std::strerror(errno);
+        if (fd >= 0 && fd != f.fd) ::close(fd);
+        throw lic::Error("cannot write " + quote(f.path) + ": flushing it failed (" + reason + ")");
+    }
+    try {
+        f.sha256 = sha256OfFd(fd);
+    } catch (...) {
+        if (fd != f.fd) ::close(fd);
+        throw;
+    }
+    if (fd != f.fd) ::close(fd);
+}
+
+void OutputSet::addVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)
+{
+    openvdb::initialize();
+    Staged f = stage(path);
+    const std::string tmp = target(f);
+    try {
+        for (std::size_t i = 0; i < grids.size(); ++i) {
+            if (!grids[i])
+                throw lic::Error("cannot write " + quote(path) + ": grid #" + std::to_string(i)
+                                 + " is null; expected a grid");
+            if (grids[i]->baseTree().activeTileCount() == 0) continue;
+            // Voxelize a copy: the caller's grid keeps its (cheaper) tiles.
+            auto copy = grids[i]->deepCopyGrid();
+            copy->apply<VoxelizableGridTypes>([](auto& grid) { grid.tree().voxelizeActiveTiles(); });
+            grids[i] = copy;
+        }
+        {
+            openvdb::io::File file(tmp);
+            file.write(grids, fileMetadata);
+            file.close();
+        }
+        // io::File does not report stream errors after opening (e.g. a full disk): check the
+        // structure of what was written and read the headers back.
+        try {
+            checkVdbStructure(tmp);
+        } catch (const lic::InputError& e) {
+            throw lic::Error("cannot write " + quote(path) + ": the file written is incomplete (disk full?): "
+                             + e.what());
+        }
+        openvdb::io::File check(tmp);
+        check.open(/*delayLoad=*/false);
+        const auto written = check.readAllGridMetadata();
+        check.close();
+        if (!written || written->size() != grids.size())
+            throw lic::Error("cannot write " + quote(path) + ": only "
+                             + std::to_string(written ? written->size() : 0) + " of "
+                             + std::to_string(grids.size()) + " grids could be read back");
+        finish(f);
+    } catch (const lic::Error&) {
+        discard(f);
+        throw;
+    } catch (const std::exception& e) {
+        discard(f);
+        throw lic::Error("cannot write " + quote(path) + ": " + e.what());
+    }
+    mFiles.push_back(std::move(f));
+}
+
+void OutputSet::addText(const std::string& path, const std::string& text)
+{
+    Staged f = stage(path);
+    try {
+        std::ofstream out(target(f), std::ios::binary | std::ios::trunc);
+        if (out) out.write(text.data(), static_cast<std::streamsize>(text.size()));
+        if (out) out.flush();
+        if (!out) throw lic::Error("cannot write " + quote(path) + " (" + std::strerror(errno) + ")");
+        out.close();
+        finish(f);
+    } catch (...) {
+        discard(f);
+        throw;
+    }
+    mFiles.push_back(std::move(f));
+}
+
+std::string OutputSet::sha256(const std::string& path) const
+{
+    for (const auto& f : mFiles)
+        if (f.path == path) return f.sha256;
+    throw lic::Error("no file " + quote(path) + " in this output set");
+}
+
+void OutputSet::commit()
+{
+    // One exclusive lock per target directory, taken in a fixed order, held while the files
+    // are renamed into place: two bakes committing to the same place cannot interleave.
+    std::set<std::string> dirs;
+    for (const auto& f : mFiles) {
+        const fs::path d = fs::path(f.path).parent_path();
+        dirs.insert(d.empty() ? "." : d.string());
+    }
+    std::vector<int> locks;
+    const auto unlock = [&] {
+        for (const int fd : locks) ::close(fd); // closing releases the flock
+        locks.clear();
+    };
+    for (const auto& d : dirs) {
+        const int fd = ::open(d.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+        if (fd < 0) continue;
+        while (::flock(fd, LOCK_EX) != 0 && errno == EINTR) {}
+        locks.push_back(fd); // a file system without flock: commit unlocked (the checksums still tell)
+    }
+    try {
+        int n = 0;
+        for (auto& f : mFiles) {
+            std::error_code ec;
+            if (f.fd >= 0) {
+                const std::string link = f.path + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(n++);
+                fs::remove(link, ec);
+                if (::linkat(AT_FDCWD, fdPath(f.fd).c_str(), AT_FDCWD, link.c_str(), AT_SYMLINK_FOLLOW) != 0)
+                    throw lic::Error("cannot write " + quote(f.path) + ": linking its data failed (" + std::strerror(errno) + ")");
+                fs::rename(link, f.path, ec);
+                if (ec) {
+                    std::error_code ec2;
+                    fs::remove(link, ec2);
+                    throw lic::Error("cannot write " + quote(f.path) + ": renaming failed (" + ec.message() + ")");
+                }
+                ::close(f.fd);
+                f.fd = -1;
+            } else {
+                fs::rename(f.named, f.path, ec);
+                if (ec) throw lic::Error("cannot write " + quote(f.path) + ": renaming " + quote(f.named) + " failed (" + ec.message() + ")");
+                f.named.clear();
+            }
+        }
+    } catch (...) {
+        unlock();
+        throw;
+    }
+    for (const int fd : locks) ::fsync(fd); // the renames themselves
+    unlock();
+    mFiles.clear();
+}
+
+void writeVdbAtomic(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)
+{
+    OutputSet out;
+    out.addVdb(path, std::move(grids), fileMetadata);
+    out.commit();
+}
+
+void writeTextAtomic(const std::string& path, const std::string& text)
+{
+    OutputSet out;
+    out.addText(path, text);
+    out.commit();
+}
+
+} // namespace vdbexport

@@ -1,0 +1,436 @@
+#include "vdbexport/render/Render.h"
+
+#include "vdbexport/io/Numbers.h"
+#include "vdbexport/io/VdbIO.h"
+
+#include <lic/composite/Colormap.h>
+#include <lic/util/Error.h>
+
+#include <openvdb/openvdb.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <tuple>
+#include <optional>
+#include <sstream>
+
+namespace vdbexport {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string quote(const std::string& s) { return "'" + s + "'"; }
+
+nlohmann::json vec(const openvdb::Vec3d& v) { return {v[0], v[1], v[2]}; }
+
+using Clock = std::chrono::steady_clock;
+double seconds(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+/// The grids of one .vdb the renderer uses.
+struct LoadedVolume
+{
+    lic::RenderVolume volume;
+    std::vector<std::pair<std::string, std::string>> gridTypes;
+};
+
+openvdb::FloatGrid::Ptr readFloat(detail::VdbReader& reader, const std::string& path, const std::string& name,
+                                  const std::string& type)
+{
+    if (type == openvdb::typeNameAsString<float>())
+        return openvdb::gridPtrCast<openvdb::FloatGrid>(reader.readGrid(name));
+    if (type == openvdb::typeNameAsString<double>()) {
+        auto all = readScalarGrids(path);
+        auto it = all.find(name);
+        if (it != all.end()) return it->second;
+    }
+    throw lic::InputError("grid '" + name + "' in " + quote(path) + " is " + type + "; expected a float grid");
+}
+
+openvdb::Vec3SGrid::Ptr readVec3(detail::VdbReader& reader, const std::string& path, const std::string& name,
+                                 const std::string& type)
+{
+    if (type == openvdb::typeNameAsString<openvdb::Vec3s>())
+        return openvdb::gridPtrCast<openvdb::Vec3SGrid>(reader.readGrid(name));
+    if (detail::isVec3Type(type)) return readVelocityGrid(path, name);
+    throw lic::InputError("grid '" + name + "' in " + quote(path) + " is " + type + "; expected a vec3s grid");
+}
+
+LoadedVolume loadVolume(const std::string& path, bool wantHalo, bool wantScalar, bool wantTangent)
+{
+    openvdb::initialize();
+    detail::VdbReader reader(path);
+    LoadedVolume out;
+    out.gridTypes = reader.gridTypes();
+    auto typeOf = [&](const std::string& name) -> std::string {
+        for (const auto& [n, t] : out.gridTypes)
+            if (n == name) return t;
+        return "";
+    };
+    const std::string dt = typeOf("density");
+    if (dt.empty())
+        throw lic::InputError(quote(path) + " has no `density` grid (it has " + detail::listGrids(out.gridTypes) +
+                              "); expected a licvdb bake with a float grid `density`");
+    out.volume.density = readFloat(reader, path, "density", dt);
+    // Always read `halo` when present: with --halos off it still marks a line bake (auto density scale).
+    if (wantHalo && !typeOf("halo").empty()) out.volume.halo = readFloat(reader, path, "halo", typeOf("halo"));
+    // A colormap over `scalar` replaces `color`: do not read it then.
+    if (!wantScalar && !typeOf("color").empty()) out.volume.color = readVec3(reader, path, "color", typeOf("color"));
+    if (wantScalar && !typeOf("scalar").empty()) out.volume.scalar = readFloat(reader, path, "scalar", typeOf("scalar"));
+    if (wantTangent && !typeOf("tangent").empty()) out.volume.tangent = readVec3(reader, path, "tangent", typeOf("tangent"));
+    return out;
+}
+
+std::string manifestDir(const std::string& manifest)
+{
+    const fs::path d = fs::path(manifest).parent_path();
+    return d.empty() ? "." : d.string();
+}
+
+} // namespace
+
+void applyRenderFlags(RenderJob& job, const RenderFlagStrings& f)
+{
+    if (!f.size.empty()) {
+        const auto v = parseNumberList("--size", f.size, "W,H in pixels (e.g. 1024,768) or one number for a square");
+        if (v.size() > 2) throw lic::InputError("--size \"" + f.size + "\" has " + std::to_string(v.size()) +
+                                                " numbers; expected W,H in pixels");
+        const double w = v[0], h = v.size() == 2 ? v[1] : v[0];
+        if (w != std::floor(w) || h != std::floor(h) || w < 1 || h < 1 || w > 32768 || h > 32768)
+            throw lic::InputError("--size \"" + f.size + "\" is out of range; expected whole numbers of pixels, 1 to 32768");
+        job.camera.width = int(w);
+        job.camera.height = int(h);
+    }
+    if (!f.view.empty()) job.view = lic::viewFromString(f.view);
+    if (!f.halos.empty()) {
+        if (f.halos == "on") job.settings.halos = true;
+        else if (f.halos == "off") job.settings.halos = false;
+        else throw lic::InputError("--halos \"" + f.halos + "\" is not valid; expected on or off");
+    }
+    if (!f.light.empty()) {
+        if (f.light == "headlight") {
+            job.settings.lighting.headlight = true;
+        } else if (f.light == "off" || f.light == "none") {
+            job.settings.lighting.enabled = false;
+        } else {
+            const auto v = parseNumberList("--light", f.light, "headlight, off, or a direction X,Y,Z towards the light");
+            if (v.size() != 3 || openvdb::Vec3d(v[0], v[1], v[2]).length() == 0.0)
+                throw lic::InputError("--light \"" + f.light +
+                                      "\" is not valid; expected headlight, off, or a non-zero direction X,Y,Z towards the light");
+            job.settings.lighting.headlight = false;
+            job.settings.lighting.direction = openvdb::Vec3d(v[0], v[1], v[2]);
+        }
+    }
+    if (!f.densityRange.empty()) {
+        const auto v = parseNumberList("--density-range", f.densityRange, "LO,HI with 0 <= LO < HI");
+        if (v.size() != 2 || !(v[0] >= 0.0 && v[0] < v[1]))
+            throw lic::InputError("--density-range \"" + f.densityRange + "\" is not valid; expected LO,HI with 0 <= LO < HI");
+        job.settings.densityLow = v[0];
+        job.settings.densityHigh = v[1];
+    }
+    if (!f.stereo.empty()) job.stereo = lic::stereoFromString(f.stereo);
+}
+
+std::string imageFramePath(const std::string& imagePath, int frame, int frames)
+{
+    if (frames <= 1) return imagePath;
+    const fs::path p(imagePath);
+    char suffix[16];
+    std::snprintf(suffix, sizeof suffix, "_%04d", frame);
+    return (p.parent_path() / (p.stem().string() + suffix + p.extension().string())).string();
+}
+
+namespace {
+/// The frame number a file name ends in (stem `OUT_0012` → OUT, 12), if it has one (4–9 digits).
+std::optional<std::pair<std::string, int>> numberedStem(const std::string& stem)
+{
+    static const std::regex numbered("(.*)_([0-9]{4,9})");
+    std::smatch m;
+    if (!std::regex_match(stem, m, numbered)) return std::nullopt;
+    return std::pair{m[1].str(), std::stoi(m[2].str())};
+}
+} // namespace
+
+std::vector<std::string> renderInputs(const std::string& input, int frames)
+{
+    if (frames < 0 || frames > 100000)
+        throw lic::InputError("--frames " + std::to_string(frames) + " is out of range; expected 1 to 100000");
+    std::error_code ec;
+    if (fs::path(input).extension() == ".json") {
+        if (!fs::is_regular_file(input, ec))
+            throw lic::InputError("manifest " + quote(input) + " does not exist; expected a bake's manifest OUT.licvdb.json (or an older OUT.json) or a .vdb");
+        nlohmann::json m;
+        try {
+            std::ifstream in(input);
+            m = nlohmann::json::parse(in);
+        } catch (const std::exception& e) {
+            throw lic::InputError("cannot read manifest " + quote(input) + ": " + e.what() +
+                                  "; expected the JSON manifest a bake writes");
+        }
+        if (!m.is_object() || !m.contains("files") || !m["files"].is_array() || m["files"].empty())
+            throw lic::InputError("manifest " + quote(input) + " has no `files` list; expected the JSON manifest a bake writes");
+        std::vector<std::string> files;
+        for (const auto& f : m["files"]) {
+            if (!f.is_string()) throw lic::InputError("manifest " + quote(input) + ": `files` holds a non-string");
+            const fs::path p(f.get<std::string>());
+            files.push_back(p.is_absolute() ? p.string() : (fs::path(manifestDir(input)) / p).string());
+        }
+        if (frames > 0 && frames != int(files.size()))
+            throw lic::InputError("--frames " + std::to_string(frames) + " contradicts manifest " + quote(input) +
+                                  ", which lists " + std::to_string(files.size()) + " files; omit --frames");
+        return files;
+    }
+    if (frames <= 1) return {input};
+    // A sequence: IN may be OUT_0001.vdb (its first frame) or OUT.vdb.
+    const fs::path p(input);
+    std::string stem = p.stem().string();
+    int first = 1; // an unsteady sequence starts at its field's first frame: IN = OUT_0010.vdb
+    if (const auto n = numberedStem(stem)) std::tie(stem, first) = *n;
+    std::vector<std::string> files;
+    for (int f = first; f < first + frames; ++f) {
+        char suffix[16];
+        std::snprintf(suffix, sizeof suffix, "_%04d", f);
+        const std::string file = (p.parent_path() / (stem + suffix + p.extension().string())).string();
+        if (!fs::exists(file, ec))
+            throw lic::InputError("frame " + std::to_string(f) + " (" + std::to_string(f - first + 1) + " of " +
+                                  std::to_string(frames) + ", " + quote(file) + ") does not exist; expected a sequence " +
+                                  stem + "_" + std::string(4 - std::min<std::size_t>(4, std::to_string(first).size()), '0') +
+                                  std::to_string(first) + p.extension().string() + " …");
+        files.push_back(file);
+    }
+    return files;
+}
+
+nlohmann::json cameraJson(const lic::Camera& c)
+{
+    const bool ortho = c.projection == lic::Projection::Orthographic;
+    // Blender's camera looks down its local −Z with local +Y up: world matrix columns are
+    // right, up, −forward, position. Euler XYZ (R = Rz·Ry·Rx).
+    const openvdb::Vec3d z = -c.forward;
+    const double r20 = c.right[2], r21 = c.up[2], r22 = z[2], r10 = c.right[1], r00 = c.right[0];
+    double ex, ey, ez;
+    const double cy = std::sqrt(r00 * r00 + r10 * r10);
+    if (cy > 1e-9) {
+        ex = std::atan2(r21, r22);
+        ey = std::atan2(-r20, cy);
+        ez = std::atan2(r10, r00);
+    } else { // gimbal lock
+        ex = std::atan2(-z[1], c.up[1]);
+        ey = std::atan2(-r20, cy);
+        ez = 0.0;
+    }
+    nlohmann::json m = nlohmann::json::array();
+    for (int row = 0; row < 3; ++row)
+        m.push_back({c.right[row], c.up[row], z[row], c.position[row]});
+    m.push_back({0.0, 0.0, 0.0, 1.0});
+    nlohmann::json j{{"projection", lic::toString(c.projection)},
+                     {"position", vec(c.position)},
+                     {"forward", vec(c.forward)},
+                     {"up", vec(c.up)},
+                     {"right", vec(c.right)},
+                     {"target", vec(c.target)},
+                     {"azimuth_degrees", c.azimuth},
+                     {"elevation_degrees", c.elevation},
+                     {"distance", c.distance},
+                     {"image_size", {c.width, c.height}}};
+    if (ortho) {
+        j["ortho_width"] = c.orthoWidth;
+        j["ortho_height"] = c.orthoHeight;
+    } else {
+        j["fov_y_degrees"] = c.fovY;
+        j["fov_x_degrees"] = c.fovX();
+    }
+    nlohmann::json b{{"type", ortho ? "ORTHO" : "PERSP"},
+                     {"matrix_world", m},
+                     {"rotation_euler", {ex, ey, ez}},
+                     {"rotation_mode", "XYZ"},
+                     {"sensor_fit", "VERTICAL"},
+                     {"resolution_x", c.width},
+                     {"resolution_y", c.height},
+                     {"pixel_aspect", 1.0}};
+    if (ortho) b["ortho_scale"] = c.orthoHeight;
+    else b["angle_y"] = c.fovY * 3.14159265358979323846 / 180.0;
+    j["blender"] = b;
+    return j;
+}
+
+nlohmann::json render(const RenderJob& job, lic::Progress& progress)
+{
+    const auto tStart = Clock::now();
+    // Validate everything cheap before reading anything.
+    if (job.output.empty()) throw lic::InputError("no output image; give --out IMAGE.png (or .exr)");
+    const bool linearOut = isSceneLinearPath(job.output);
+    const bool gifOut = fs::path(job.output).extension() == ".gif";
+    lic::RenderSettings settings = job.settings;
+    if (!job.colormap.empty()) {
+        std::error_code ec;
+        if (fs::is_regular_file(job.colormap, ec)) {
+            std::ifstream in(job.colormap);
+            std::stringstream ss;
+            ss << in.rdbuf();
+            settings.colormap = lic::Colormap::fromCsv(ss.str(), job.colormap);
+        } else {
+            settings.colormap = lic::Colormap::named(job.colormap);
+        }
+    }
+    settings.validate();
+    lic::CameraSettings camSettings = job.camera;
+    const auto [az, el] = lic::viewAngles(job.view.value_or(lic::View::Front));
+    camSettings.azimuth = job.azimuth.value_or(az);
+    camSettings.elevation = job.elevation.value_or(el);
+    camSettings.validate();
+    DisplayTransform display;
+    if (!linearOut || job.gif) {
+        display.config = findOcioConfig(job.ocioConfig);
+        display.view = viewFromFlag(job.viewTransform);
+        toDisplay(lic::Image(1, 1), display); // fail now on a bad config, not after rendering
+    }
+    if (job.gif && gifOut) throw lic::InputError("--gif writes OUT.gif beside a sequence of images; --out is already a .gif");
+    if (job.eyeSeparation && !(*job.eyeSeparation > 0.0))
+        throw lic::InputError("--eye-separation must be > 0 (world units)");
+    if (!(job.fps > 0.0 && job.fps <= 100.0)) throw lic::InputError("--fps must be in (0, 100]");
+
+    const std::vector<std::string> inputs = renderInputs(job.input, job.frames);
+    const int frames = int(inputs.size());
+    if (job.gif && frames < 2 && !gifOut)
+        throw lic::InputError("--gif needs a sequence (--frames N or a manifest listing several files)");
+
+    openvdb::Vec3SGrid::Ptr flow;
+    if (!job.field.empty()) flow = readVelocityGrid(job.field);
+
+    std::vector<std::string> written;
+    std::vector<lic::Image> gifFrames;
+    nlohmann::json cameras, summary;
+    double tLoad = 0, tRender = 0, tWrite = 0;
+    lic::RenderStats total;
+    bool usedHalo = false, lit = false, colored = false;
+    double usedScale = settings.densityScale;
+    const bool autoScale = settings.densityScale == 0.0;
+    std::optional<lic::Camera> camera;
+    std::optional<std::pair<lic::Camera, lic::Camera>> eyes;
+    std::vector<std::pair<std::string, std::string>> firstGrids;
+    try {
+        for (int f = 1; f <= frames; ++f) {
+            auto t0 = Clock::now();
+            LoadedVolume lv = loadVolume(inputs[std::size_t(f - 1)], /*wantHalo=*/true, settings.colormap.has_value(),
+                                         settings.lighting.enabled);
+            if (f == 1) firstGrids = lv.gridTypes;
+            if (settings.lighting.enabled) lv.volume.flow = flow;
+            lic::HaloRaycaster caster(lv.volume, settings, progress);
+            tLoad += seconds(t0);
+            usedHalo = caster.hasHalo();
+            usedScale = caster.settings().densityScale;
+            settings.densityScale = usedScale; // a sequence keeps the first frame's (auto) scale
+            lit = caster.hasTangent() && settings.lighting.enabled;
+            colored = caster.hasColor();
+            // One camera for the whole sequence, framed on the first frame.
+            if (!camera) {
+                camera = lic::makeCamera(camSettings, caster.worldBBox());
+                if (job.stereo != lic::StereoMode::None)
+                    eyes = lic::stereoPair(*camera, job.eyeSeparation.value_or(camera->distance / 30.0));
+            }
+            t0 = Clock::now();
+            lic::Image img;
+            lic::RenderStats st;
+            if (eyes) {
+                lic::RenderStats st2;
+                const lic::Image l = caster.render(eyes->first, progress, &st);
+                const lic::Image r = caster.render(eyes->second, progress, &st2);
+                st.rays += st2.rays;
+                st.samples += st2.samples;
+                st.skippedBricks += st2.skippedBricks;
+                img = job.stereo == lic::StereoMode::SideBySide ? lic::sideBySide(l, r) : lic::anaglyph(l, r);
+            } else {
+                img = caster.render(*camera, progress, &st);
+            }
+            tRender += seconds(t0);
+            total.rays += st.rays;
+            total.samples += st.samples;
+            total.skippedBricks += st.skippedBricks;
+
+            t0 = Clock::now();
+            if (gifOut) {
+                gifFrames.push_back(std::move(img));
+            } else {
+                // Images are numbered as their files (an unsteady sequence's field frames).
+                const auto n = numberedStem(fs::path(inputs[std::size_t(f - 1)]).stem().string());
+                const std::string path = imageFramePath(job.output, n ? n->second : f, frames);
+                writeImageAtomic(path, img, display,
+                                 {{"Software", std::string("licvdb ") + LICVDB_VERSION},
+                                  {"ImageDescription", "licvdb render of " + inputs[std::size_t(f - 1)]}});
+                written.push_back(path);
+                if (job.gif) gifFrames.push_back(std::move(img));
+            }
+            tWrite += seconds(t0);
+        }
+        const auto t0 = Clock::now();
+        if (gifOut) {
+            writeGifAtomic(job.output, gifFrames, display, job.fps);
+            written.push_back(job.output);
+        } else if (job.gif) {
+            fs::path g(job.output);
+            g.replace_extension(".gif");
+            writeGifAtomic(g.string(), gifFrames, display, job.fps);
+            written.push_back(g.string());
+        }
+        tWrite += seconds(t0);
+    } catch (...) {
+        for (const auto& p : written) {
+            std::error_code ec;
+            fs::remove(p, ec);
+        }
+        throw;
+    }
+
+    nlohmann::json grids = nlohmann::json::array();
+    for (const auto& [n, t] : firstGrids) grids.push_back({{"name", n}, {"type", t}});
+    summary = {
+        {"input", job.input},
+        {"inputs", inputs},
+        {"output", job.output},
+        {"files", written},
+        {"frames", frames},
+        {"size", {camSettings.width, camSettings.height}},
+        {"camera", cameraJson(*camera)},
+        {"stereo", nullptr},
+        {"grids", grids},
+        {"halos", usedHalo},
+        {"illuminated", lit},
+        {"colored", colored},
+        {"settings",
+         {{"density_scale", usedScale},
+          {"density_scale_auto", autoScale},
+          {"density_range", {settings.densityLow, settings.densityHigh}},
+          {"brightness", settings.brightness},
+          {"step_voxels", settings.step},
+          {"halo_strength", settings.haloStrength},
+          {"halo_threshold", settings.haloThreshold},
+          {"colormap", settings.colormap ? nlohmann::json(settings.colormap->name()) : nlohmann::json(nullptr)},
+          {"light", settings.lighting.headlight ? nlohmann::json("headlight") : vec(settings.lighting.direction)},
+          {"view_transform", linearOut ? nlohmann::json(nullptr) : nlohmann::json(display.view)},
+          {"ocio_config", display.config.empty() ? nlohmann::json(nullptr) : nlohmann::json(display.config)},
+          {"threads", settings.threads}}},
+        {"stats",
+         {{"rays", total.rays},
+          {"samples", total.samples},
+          {"samples_per_ray", total.rays ? double(total.samples) / double(total.rays) : 0.0},
+          {"skipped_bricks", total.skippedBricks}}},
+        {"seconds", {{"load", tLoad}, {"render", tRender}, {"write", tWrite}, {"total", seconds(tStart)}}},
+    };
+    if (eyes) {
+        summary["stereo"] = {{"mode", lic::toString(job.stereo)},
+                             {"eye_separation", job.eyeSeparation.value_or(camera->distance / 30.0)},
+                             {"left", cameraJson(eyes->first)},
+                             {"right", cameraJson(eyes->second)}};
+        summary["image_size"] = {job.stereo == lic::StereoMode::SideBySide ? 2 * camSettings.width : camSettings.width,
+                                 camSettings.height};
+    } else {
+        summary["image_size"] = {camSettings.width, camSettings.height};
+    }
+    return summary;
+}
+
+} // namespace vdbexport
