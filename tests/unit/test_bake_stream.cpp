@@ -288,8 +288,10 @@ TEST_F(StreamBake, StreamedPercentilesAreExact)
         const vdbexport::pipeline::ScalarField probe(s);
         for (std::size_t b = 0; b < domain.blockCount(); ++b) {
             const auto& mask = domain.blockMask(b);
-            for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off))
+            for (auto on = mask.beginOn(); on; ++on) {
+                const std::size_t off = on.pos();
                 v.push_back(probe.at(domain.worldOf(domain.coordOf(b * lic::OutputDomain::kBlockVoxels + off))));
+            }
         }
         auto pct = [&](double q) {
             const std::size_t k = std::min(v.size() - 1, std::size_t(q * double(v.size() - 1) + 0.5));

@@ -20,7 +20,8 @@ ChannelStats channelStats(const OutputDomain& domain, const std::vector<float>& 
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
             const auto& mask = domain.blockMask(b);
             Partial p;
-            for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off)) {
+            for (auto on = mask.beginOn(); on; ++on) {
+                const std::size_t off = on.pos();
                 const float v = slots[b * OutputDomain::kBlockVoxels + off];
                 p.sum += v;
                 p.sumSq += double(v) * v;

@@ -34,7 +34,7 @@ BrickLayout::BrickLayout(const OutputDomain& domain, int dim)
         const openvdb::Coord& o = domain.blockOrigin(b);
         Brick& brick = mBricks[index[openvdb::Coord(detail::floorDiv(o[0], dim), detail::floorDiv(o[1], dim), detail::floorDiv(o[2], dim))]];
         brick.blocks.push_back(std::uint32_t(b));
-        brick.activeVoxels += domain.blockMask(b).count();
+        brick.activeVoxels += domain.blockMask(b).countOn();
     }
     for (const Brick& b : mBricks) mMaxBlocks = std::max(mMaxBlocks, b.blocks.size());
 }

@@ -73,17 +73,17 @@ void OutputDomain::init(const openvdb::math::Transform& fieldTransform, const op
                 const openvdb::Coord ijk = origin + openvdb::Coord(off >> 6, (off >> 3) & 7, off & 7);
                 if (!mBBox.isInside(ijk)) continue;
                 const openvdb::Coord f(detail::floorDiv(ijk[0], K), detail::floorDiv(ijk[1], K), detail::floorDiv(ijk[2], K));
-                if (acc.isValueOn(f)) masks[b].set(std::size_t(off));
+                if (acc.isValueOn(f)) masks[b].setOn(openvdb::Index(off));
             }
         }
     });
     mBlockTable.assign(nBlocks, -1);
     for (std::size_t b = 0; b < nBlocks; ++b) {
-        if (masks[b].none()) continue;
+        if (masks[b].isOff()) continue;
         mBlockTable[b] = std::int64_t(mBlockOrigins.size());
         mBlockOrigins.push_back(originOf(b));
         mMasks.push_back(masks[b]);
-        mActiveVoxels += masks[b].count();
+        mActiveVoxels += masks[b].countOn();
     }
 }
 
@@ -100,9 +100,9 @@ typename GridT::Ptr OutputDomain::makeGrid(const std::vector<typename GridT::Val
             auto* leaf = new LeafT(mBlockOrigins[b], openvdb::zeroVal<ValueT>(), false);
             const ValueT* src = slots.data() + b * kBlockVoxels;
             const std::uint8_t* kept = keep ? keep->data() + b * kBlockVoxels : nullptr;
-            for (auto it = mMasks[b]._Find_first(); it < std::size_t(kBlockVoxels);
-                 it = mMasks[b]._Find_next(it)) {
-                if (!kept || kept[it]) leaf->setValueOn(openvdb::Index(it), src[it]);
+            for (auto on = mMasks[b].beginOn(); on; ++on) {
+                const openvdb::Index it = on.pos();
+                if (!kept || kept[it]) leaf->setValueOn(it, src[it]);
             }
             if (leaf->isEmpty()) {
                 delete leaf;

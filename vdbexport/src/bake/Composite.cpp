@@ -145,7 +145,8 @@ void Compositor::consumeBlock(const lic::BrickChannels& bc, std::size_t i, Momen
     const lic::NoiseTexture* noise = (!mPlan.spots && r.output.writeInput) ? &(*mInput.noise)(*bc.brick) : nullptr;
     const double minSpeed = mField.maxSpeed() * 1e-6;
 
-    for (std::size_t off = mask._Find_first(); off < V; off = mask._Find_next(off)) {
+    for (auto on = mask.beginOn(); on; ++on) {
+        const std::size_t off = on.pos();
         const openvdb::Coord ijk = mDomain.coordOf(b * V + off);
         const openvdb::Vec3d world = mDomain.worldOf(ijk);
         auto raw = [&](int c) { return bc.block(i, c)[off]; };

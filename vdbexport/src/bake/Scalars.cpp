@@ -149,7 +149,8 @@ Histogram histogram(const ScalarField& scalar, const lic::OutputDomain& domain, 
             for (std::size_t i = r.begin(); i != r.end(); ++i) {
                 const std::size_t b = blocks ? (*blocks)[i] : i;
                 const auto& mask = domain.blockMask(b);
-                for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off)) {
+                for (auto on = mask.beginOn(); on; ++on) {
+                    const std::size_t off = on.pos();
                     const float v = scalar.at(domain.worldOf(domain.coordOf(b * lic::OutputDomain::kBlockVoxels + off)));
                     if (std::isfinite(v)) add(orderKey(v), h);
                 }

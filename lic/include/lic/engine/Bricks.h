@@ -84,7 +84,7 @@ public:
         if (x >= unsigned(mDim) || y >= unsigned(mDim) || z >= unsigned(mDim)) return -1;
         const std::size_t block = (std::size_t(x >> 3) * unsigned(mNb) + (y >> 3)) * unsigned(mNb) + (z >> 3);
         const std::size_t off = ((x & 7u) << 6) | ((y & 7u) << 3) | (z & 7u);
-        return mActive[block].test(off) ? std::int64_t(block * OutputDomain::kBlockVoxels + off) : -1;
+        return mActive[block].isOn(openvdb::Index(off)) ? std::int64_t(block * OutputDomain::kBlockVoxels + off) : -1;
     }
     /// True when the voxel lies inside the brick's box (active or not).
     bool inside(const openvdb::Coord& ijk) const

@@ -202,7 +202,8 @@ void fastLicBrick(const VelocityField& field, const OutputDomain& domain, const 
         const openvdb::Coord& origin = domain.blockOrigin(b);
         const std::size_t base = bi.localBlock(origin) * OutputDomain::kBlockVoxels;
         const auto& mask = domain.blockMask(b);
-        for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off)) {
+        for (auto on = mask.beginOn(); on; ++on) {
+            const std::size_t off = on.pos();
             if (sc.hits[base + off] >= minHits) continue;
             const openvdb::Coord ijk = origin + openvdb::Coord(int(off >> 6), int((off >> 3) & 7), int(off & 7));
             traceAndDeposit(std::int64_t(base + off), ijk);
@@ -216,7 +217,8 @@ void fastLicBrick(const VelocityField& field, const OutputDomain& domain, const 
         const std::size_t base = bi.localBlock(domain.blockOrigin(b)) * OutputDomain::kBlockVoxels;
         const auto& mask = domain.blockMask(b);
         float* dst = out.data() + i * std::size_t(K) * OutputDomain::kBlockVoxels;
-        for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off)) {
+        for (auto on = mask.beginOn(); on; ++on) {
+            const std::size_t off = on.pos();
             const float w = sc.weight[base + off];
             if (!(w > 0.0f)) continue;
             const float inv = 1.0f / w;

@@ -45,7 +45,8 @@ void naiveLicBrick(const VelocityField& field, const OutputDomain& domain, const
         const std::uint32_t b = brick.blocks[bi];
         float* dst = out.data() + bi * std::size_t(K) * V;
         const auto& mask = domain.blockMask(b);
-        for (std::size_t off = mask._Find_first(); off < mask.size(); off = mask._Find_next(off)) {
+        for (auto on = mask.beginOn(); on; ++on) {
+            const std::size_t off = on.pos();
             const openvdb::Coord ijk = domain.coordOf(std::size_t(b) * V + off);
             const openvdb::Vec3d seed = domain.worldOf(ijk);
             line.clear();
@@ -93,7 +94,7 @@ void naiveLicBrick(const VelocityField& field, const OutputDomain& domain, const
             samples += line.size() + 1;
         }
         samplesTotal += samples;
-        progress.advance(mask.count()); // naive is slow: report per block, not per brick
+        progress.advance(mask.countOn()); // naive is slow: report per block, not per brick
     });
     stats.samples += samplesTotal.load();
     stats.streamlines += brick.activeVoxels;

@@ -7,7 +7,6 @@
 #include <openvdb/openvdb.h>
 
 #include <array>
-#include <bitset>
 #include <cstdint>
 #include <vector>
 
@@ -31,7 +30,8 @@ public:
     static constexpr int kLog2Block = 3;
     static constexpr int kBlockDim = 1 << kLog2Block;
     static constexpr int kBlockVoxels = kBlockDim * kBlockDim * kBlockDim;
-    using Mask = std::bitset<kBlockVoxels>;
+    /// Active voxels of one block, by leaf offset (the mask type of the leaves we write).
+    using Mask = openvdb::util::NodeMask<kLog2Block>;
 
     /// @param upsample output voxels per field voxel along each axis, in [1, 16].
     /// @throw lic::InputError for an upsample out of range or an output of more than 2^31 voxels.
@@ -71,7 +71,7 @@ public:
     }
     bool isActive(std::size_t slot) const
     {
-        return mMasks[slot / kBlockVoxels].test(slot % kBlockVoxels);
+        return mMasks[slot / kBlockVoxels].isOn(openvdb::Index(slot % kBlockVoxels));
     }
     /// Slot of an output voxel, or −1 when it is outside or inactive.
     std::int64_t slotOf(const openvdb::Coord& ijk) const
@@ -79,7 +79,7 @@ public:
         const std::int64_t b = blockOf(ijk);
         if (b < 0) return -1;
         const int off = offsetOf(ijk);
-        return mMasks[std::size_t(b)].test(std::size_t(off)) ? b * kBlockVoxels + off : -1;
+        return mMasks[std::size_t(b)].isOn(openvdb::Index(off)) ? b * kBlockVoxels + off : -1;
     }
     /// Block index of the block containing ijk, or −1.
     std::int64_t blockOf(const openvdb::Coord& ijk) const
