@@ -8,6 +8,7 @@
 //
 // Run: build/tests/bench_lic [--benchmark_filter=fast]   (the naive rows take ~10–25 s each)
 #include "lic/engine/Engine.h"
+#include "lic/engine/Gather.h"
 #include "lic/field/Presets.h"
 #include "lic/texture/Noise.h"
 
@@ -87,7 +88,7 @@ void bake(benchmark::State& state, lic::EngineType engine, double length, int br
     settings.threads = kThreads;
     settings.brick = brick;
     settings.stride = stride;
-    const lic::BrickLayout layout(s.domain, lic::detail::brickDim(settings));
+    const lic::BrickLayout layout(s.domain, lic::brickDim(settings));
     lic::LicStats stats;
     CpuTimer cpu{state};
     for (auto _ : state) {

@@ -3,6 +3,7 @@
 // field (60×60×88 at upsample 2 = 2.5 M output voxels), length 20, step 0.5.
 // Run: build/tests/bench_spots   (about a minute on 2 cores)
 #include "lic/engine/Engine.h"
+#include "lic/engine/Gather.h"
 #include "lic/field/Presets.h"
 #include "lic/texture/Noise.h"
 #include "lic/texture/Spots.h"

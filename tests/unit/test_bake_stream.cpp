@@ -4,7 +4,7 @@
 #include "vdbexport/bake/Bake.h"
 #include "vdbexport/io/VdbIO.h"
 
-#include "bake/Scalars.h"
+#include "lic/field/ScalarField.h"
 
 #include "lic/util/Error.h"
 #include "lic/field/Presets.h"
@@ -285,7 +285,7 @@ TEST_F(StreamBake, StreamedPercentilesAreExact)
     for (const std::string name : {"speed", "vorticity"}) {
         const openvdb::FloatGrid::Ptr s = lic::deriveScalar(*f.velocity, name);
         std::vector<float> v;
-        const vdbexport::pipeline::ScalarField probe(s);
+        const lic::ScalarField probe(s);
         for (std::size_t b = 0; b < domain.blockCount(); ++b) {
             const auto& mask = domain.blockMask(b);
             for (auto on = mask.beginOn(); on; ++on) {
@@ -300,7 +300,7 @@ TEST_F(StreamBake, StreamedPercentilesAreExact)
         };
         const std::array<double, 2> expected{pct(0.01), pct(0.99)};
         for (int threads : {1, 2}) {
-            const auto got = vdbexport::pipeline::autoRange(probe, domain, threads);
+            const auto got = lic::autoRange(probe, domain, threads);
             EXPECT_EQ(got[0], expected[0]) << name;
             EXPECT_EQ(got[1], expected[1]) << name;
         }
@@ -314,7 +314,7 @@ TEST(ScalarSet, AbsSuffixIsTheMagnitudeOfAnyScalar)
     const lic::PresetField f = lic::makePresetField("tabbed-jet", openvdb::Coord(16, 16, 24));
     std::map<std::string, openvdb::FloatGrid::Ptr> file;
     for (const auto& s : f.scalars) file[s->getName()] = s;
-    vdbexport::pipeline::ScalarSet set(*f.velocity, file);
+    lic::ScalarSet set(*f.velocity, file);
     for (const std::string base : {"streamwise-vorticity", "temperature", "speed-gradient"}) {
         const auto signedGrid = set.get(base);
         const auto mag = set.get(base + "-abs");

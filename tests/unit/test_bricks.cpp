@@ -2,9 +2,10 @@
 // output for any thread count over many bricks, no seams at brick faces, and the one-trace claim
 // of cyclic loops.
 #include "lic/composite/Animation.h"
-#include "lic/engine/Bricks.h"
+#include "lic/field/Bricks.h"
 #include "lic/composite/Contrast.h"
 #include "lic/engine/Engine.h"
+#include "lic/engine/Gather.h"
 #include "lic/texture/Noise.h"
 #include "lic/texture/Spots.h"
 
@@ -88,11 +89,11 @@ TEST(Bricks, ABricksResultDependsOnlyOnTheBrick)
     ASSERT_EQ(whole.size(), layout.size());
     for (std::size_t i = layout.size(); i-- > 0;) {
         NoiseBrickSource fresh(9, NoiseFilter::Binomial, ghostMargin(s));
-        detail::FastScratch scratch;
-        const BrickIndex bi(domain, layout[i], layout.dim());
+        FastEngine::Scratch scratch;
         std::vector<float> out;
         LicStats st;
-        fastLicBrick<NoiseTexture, false>(field, domain, layout[i], bi, fresh(layout[i]), s, scratch, out, st);
+        FastEngine::brick<NoiseTexture, false>(field, domain, layout[i], fresh(layout[i]), s, scratch, out, st,
+                                               nullProgress());
         ASSERT_TRUE(sameBits(out, whole.at(i))) << "brick " << i;
     }
     // A share of the bricks (as one process of a distributed bake gets) gives the same bits,

@@ -11,6 +11,7 @@
 #include "bake/FieldShare.h"
 #include "bake/Plan.h"
 
+#include "lic/engine/Engine.h"
 #include "lic/util/Error.h"
 #include "lic/field/Presets.h"
 #include "lic/texture/Noise.h"
@@ -163,11 +164,11 @@ TEST_F(Distribute, APartOfTheFieldConvolvesItsBricksLikeTheWholeField)
             auto convolve = [&](const lic::VelocityField& f, const lic::OutputDomain& d, const lic::BrickLayout& l) {
                 return collect([&](const lic::BrickSink& sink) {
                     if (spots) {
-                        lic::convolveSpotBricks(f, d, l, spotSet, r.input.radii, r.input.haloScale, plan.settings,
-                                                lic::nullProgress(), sink);
+                        lic::convolveSpotBricks({f, d, l, plan.settings, lic::nullProgress()},
+                                                {spotSet, r.input.radii, r.input.haloScale}, sink);
                     } else {
                         lic::NoiseBrickSource noise(7, lic::NoiseFilter::Binomial, lic::ghostMargin(plan.settings));
-                        lic::convolveNoiseBricks(f, d, l, noise, plan.settings, lic::nullProgress(), sink);
+                        lic::convolveNoiseBricks({f, d, l, plan.settings, lic::nullProgress()}, noise, sink);
                     }
                 });
             };

@@ -2,6 +2,7 @@
 #include "lic/composite/Animation.h"
 #include "lic/composite/Contrast.h"
 #include "lic/engine/Engine.h"
+#include "lic/engine/Gather.h"
 #include "lic/texture/Noise.h"
 
 #include "TestFields.h"

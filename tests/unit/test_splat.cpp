@@ -3,6 +3,7 @@
 // follows the lines and not the box, and one trace for a loop.
 #include "lic/composite/Animation.h"
 #include "lic/engine/Engine.h"
+#include "lic/engine/Gather.h"
 #include "lic/field/Presets.h"
 #include "lic/texture/Noise.h"
 #include "lic/engine/Splat.h"

@@ -1,6 +1,7 @@
 // Spot input textures: distributions and their evenness, the smooth sphere profile, the analytic
 // multi-channel texture, the single-spot peak, halos enclosing lines, width levels, ridges.
 #include "lic/engine/Engine.h"
+#include "lic/engine/Gather.h"
 #include "lic/texture/Noise.h"
 #include "lic/field/Region.h"
 #include "lic/texture/Spots.h"

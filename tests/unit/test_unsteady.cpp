@@ -6,6 +6,7 @@
 // active voxels stay within 25% of frame 1's; any thread count gives the same files.
 #include "vdbexport/bake/Bake.h"
 #include "vdbexport/io/FieldSequence.h"
+#include "vdbexport/io/OutputNames.h"
 #include "vdbexport/io/VdbIO.h"
 
 #include "lic/util/Error.h"
@@ -117,7 +118,7 @@ TEST(FramePattern, HashesAndPrintf)
     EXPECT_EQ(vdbexport::expandFramePattern("v_##.vdb", 12345), "v_12345.vdb");
     EXPECT_THROW(vdbexport::expandFramePattern("vel.vdb", 1), lic::InputError);
     EXPECT_THROW(vdbexport::expandFramePattern("v_##_%d.vdb", 1), lic::InputError);
-    EXPECT_EQ(vdbexport::sequenceFramePath("out/smoke.vdb", 12), "out/smoke_0012.vdb");
+    EXPECT_EQ(vdbexport::numberedPath("out/smoke.vdb", 12), "out/smoke_0012.vdb");
 }
 
 TEST(AdvectedNoiseTest, UniformFlowCarriesTheNoiseExactly)

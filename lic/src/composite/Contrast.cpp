@@ -4,48 +4,38 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 
 namespace lic {
 
+ChannelStats Moments::stats() const
+{
+    ChannelStats s;
+    if (count == 0) return s;
+    s.mean = sum / count;
+    s.stddev = std::sqrt(std::max(0.0, sumSq / count - s.mean * s.mean));
+    s.min = lo;
+    s.max = hi;
+    return s;
+}
+
+ContrastStretch::ContrastStretch(const ChannelStats& stats, double sigmas, bool enabled)
+    : mActive(enabled && stats.stddev >= 1e-6)
+{
+    mLo = stats.mean - sigmas * stats.stddev;
+    mScale = mActive ? 1.0 / (2.0 * sigmas * stats.stddev) : 1.0;
+}
+
 ChannelStats channelStats(const OutputDomain& domain, const std::vector<float>& slots)
 {
-    struct Partial
-    {
-        double sum = 0, sumSq = 0;
-        float lo = std::numeric_limits<float>::max(), hi = std::numeric_limits<float>::lowest();
-    };
-    std::vector<Partial> parts(domain.blockCount());
+    std::vector<Moments> parts(domain.blockCount());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, domain.blockCount()), [&](const auto& r) {
-        for (std::size_t b = r.begin(); b != r.end(); ++b) {
-            const auto& mask = domain.blockMask(b);
-            Partial p;
-            for (auto on = mask.beginOn(); on; ++on) {
-                const std::size_t off = on.pos();
-                const float v = slots[b * OutputDomain::kBlockVoxels + off];
-                p.sum += v;
-                p.sumSq += double(v) * v;
-                p.lo = std::min(p.lo, v);
-                p.hi = std::max(p.hi, v);
-            }
-            parts[b] = p;
-        }
+        for (std::size_t b = r.begin(); b != r.end(); ++b)
+            for (auto on = domain.blockMask(b).beginOn(); on; ++on)
+                parts[b].add(slots[b * OutputDomain::kBlockVoxels + on.pos()]);
     });
-    Partial all;
-    for (const Partial& p : parts) {
-        all.sum += p.sum;
-        all.sumSq += p.sumSq;
-        all.lo = std::min(all.lo, p.lo);
-        all.hi = std::max(all.hi, p.hi);
-    }
-    ChannelStats s;
-    const double n = double(domain.activeVoxelCount());
-    if (n == 0) return s;
-    s.mean = all.sum / n;
-    s.stddev = std::sqrt(std::max(0.0, all.sumSq / n - s.mean * s.mean));
-    s.min = all.lo;
-    s.max = all.hi;
-    return s;
+    Moments all;
+    for (const Moments& p : parts) all.merge(p);
+    return all.stats();
 }
 
 ChannelStats contrastStretch(const OutputDomain& domain, std::vector<float>& slots, double sigmas)
@@ -57,14 +47,11 @@ ChannelStats contrastStretch(const OutputDomain& domain, std::vector<float>& slo
 
 void applyContrast(const OutputDomain& domain, std::vector<float>& slots, const ChannelStats& s, double sigmas)
 {
-    if (s.stddev < 1e-6) return;
-    const double lo = s.mean - sigmas * s.stddev;
-    const double scale = 1.0 / (2.0 * sigmas * s.stddev);
+    const ContrastStretch stretch(s, sigmas);
+    if (!stretch.active()) return;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, slots.size()), [&](const auto& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) {
-            if (!domain.isActive(i)) continue;
-            slots[i] = float(std::clamp((double(slots[i]) - lo) * scale, 0.0, 1.0));
-        }
+        for (std::size_t i = r.begin(); i != r.end(); ++i)
+            if (domain.isActive(i)) slots[i] = float(stretch(double(slots[i])));
     });
 }
 

@@ -1,123 +1,184 @@
 #include "lic/engine/Engine.h"
 
+#include "lic/engine/Gather.h"
+#include "lic/engine/Splat.h"
 #include "lic/util/Error.h"
+#include "lic/util/Names.h"
 
-#include <cmath>
 #include <algorithm>
-#include <sstream>
+#include <cmath>
 
 namespace lic {
 
-const char* toString(EngineType e)
+// Gather engines' entry points, compiled in GatherNoise.cpp and GatherSpots.cpp.
+template<typename Engine>
+LicStats gatherNoiseBricks(const ConvolveJob& job, NoiseBrickSource& noise, const BrickSink& sink);
+template<typename Engine>
+LicStats gatherSpotBricks(const ConvolveJob& job, const SpotInput& spots, const BrickSink& sink);
+
+namespace {
+
+int gatherBrickDim(const LicSettings& settings)
 {
-    switch (e) {
-    case EngineType::Naive: return "naive";
-    case EngineType::Fast: return "fast";
-    case EngineType::Splat: return "splat";
+    // Measured on the 128³ abc bake (docs/performance.md): 64 for kernels up to ~24 voxels;
+    // longer kernels need larger bricks to keep the window tails (n samples past each end of a
+    // line) a small part of each line. Powers of two, so power-of-two volumes split evenly.
+    return settings.length <= 24 ? 64 : 128;
+}
+
+double gatherSpotReach(const LicSettings& settings, double maxSpotRadius)
+{
+    // A voxel's window (the ghost margin) meets the spot's largest halo, with its soft edge.
+    return double(ghostMargin(settings)) + (maxSpotRadius + 0.5) + 2.0;
+}
+
+double gatherFieldReach(const LicSettings& settings, bool spots, double maxSpotRadius, int stride)
+{
+    // The ghost margin (the last texture sample, with its rounding and footprint), one
+    // integration step past the last sample (RK4 every `stride` samples, RK45 at most 2 voxels or
+    // a step), a voxel of rounding; for spots, those whose weights a brick's texture reads (the
+    // ROI pre-mask at their centres).
+    const double integration = std::max({double(stride) * settings.step, 2.0, settings.step}) + 1.0;
+    double out = double(ghostMargin(settings)) + integration;
+    if (spots) out += maxSpotRadius + 1.5;
+    return out;
+}
+
+// The engine table.
+constexpr EngineInfo kEngines[] = {
+    {EngineType::Naive, "naive", "every voxel traces its own streamline (the reference; slow)", gatherBrickDim,
+     gatherSpotReach, gatherFieldReach, gatherNoiseBricks<NaiveEngine>, gatherSpotBricks<NaiveEngine>},
+    {EngineType::Fast, "fast", "fast-LIC: long streamlines deposit into every voxel they cross", gatherBrickDim,
+     gatherSpotReach, gatherFieldReach, gatherNoiseBricks<FastEngine>, gatherSpotBricks<FastEngine>},
+    {EngineType::Splat, "splat", "spots only: one streamline per spot, its footprint splatted around it",
+     splatBrickDim, splatSpotReach, splatFieldReach, nullptr, splatSpotBricks},
+};
+
+std::vector<EnumName<EngineType>> engineNames()
+{
+    std::vector<EnumName<EngineType>> names;
+    for (const EngineInfo& e : kEngines) names.push_back({e.type, e.name});
+    return names;
+}
+
+/// Names of the engines that take noise (or spots), as "a or b".
+std::string enginesTaking(bool spots)
+{
+    std::vector<EnumName<EngineType>> names;
+    for (const EngineInfo& e : kEngines)
+        if (spots ? e.spotBricks != nullptr : e.noiseBricks != nullptr) names.push_back({e.type, e.name});
+    return listNames<EngineType>(names);
+}
+
+} // namespace
+
+std::span<const EngineInfo> engines() { return kEngines; }
+
+const EngineInfo& engineInfo(EngineType type)
+{
+    for (const EngineInfo& e : kEngines)
+        if (e.type == type) return e;
+    throw Error("engine " + std::to_string(int(type)) + " is not in the engine table");
+}
+
+const char* toString(EngineType e) { return engineInfo(e).name; }
+
+EngineType engineFromString(const std::string& s) { return valueOf<EngineType>(engineNames(), s, "engine"); }
+
+EngineType chooseEngine(const std::string& name, bool spots)
+{
+    if (name == "auto") return spots ? EngineType::Splat : EngineType::Fast;
+    const EngineType type = engineFromString(name);
+    const EngineInfo& e = engineInfo(type);
+    if (spots ? e.spotBricks == nullptr : e.noiseBricks == nullptr) {
+        throw InputError(std::string("engine \"") + e.name + "\" does not take " + (spots ? "spot" : "noise") +
+                         " input; use " + enginesTaking(spots));
     }
-    return "?";
+    return type;
 }
 
-EngineType engineFromString(const std::string& s)
+double SpotInput::maxRadius() const
 {
-    if (s == "naive") return EngineType::Naive;
-    if (s == "fast") return EngineType::Fast;
-    if (s == "splat") return EngineType::Splat;
-    throw InputError("engine \"" + s + "\" is unknown; expected naive, fast or splat");
+    double r = 0.0;
+    for (double rad : radii) r = std::max(r, rad * haloScale);
+    return r;
 }
 
-const char* toString(KernelType k) { return k == KernelType::Exp ? "exp" : "box"; }
-
-KernelType kernelFromString(const std::string& s)
+int brickDim(const LicSettings& settings)
 {
-    if (s == "box") return KernelType::Box;
-    if (s == "exp") return KernelType::Exp;
-    throw InputError("kernel \"" + s + "\" is unknown; expected box or exp");
+    return settings.brick > 0 ? settings.brick : engineInfo(settings.engine).defaultBrick(settings);
 }
 
-int LicSettings::halfSamples() const
+int ghostMargin(const LicSettings& settings)
 {
-    return std::max(1, int(std::lround(length / step)));
+    // A line leaves the brick at most half a voxel past its box (nearest-voxel rounding), then
+    // traces n more samples of arc h: ≤ n·h index units on any axis. Two more voxels cover the
+    // trilinear lookup and the binomial filter's footprint.
+    const double tail = double(settings.halfSamples()) * settings.step;
+    return int(std::ceil(tail + 0.5)) + 2;
 }
 
-void LicSettings::validate() const
+double spotReach(const LicSettings& settings, double maxSpotRadius)
 {
-    auto fail = [](const std::string& what, double got, const std::string& expected) {
-        std::ostringstream msg;
-        msg << what << " " << got << " is out of range; expected " << expected;
-        throw InputError(msg.str());
-    };
-    if (!(length > 0) || !std::isfinite(length)) fail("length", length, "> 0 output voxels");
-    if (!(step > 0) || !std::isfinite(step)) fail("step", step, "> 0 output voxels");
-    if (step > length) fail("step", step, "<= length (" + std::to_string(length) + ")");
-    if (length / step > 1e6) fail("length/step", length / step, "at most 1e6 samples per direction");
-    if (!(tolerance > 0)) fail("tolerance", tolerance, "> 0");
-    if (kernel == KernelType::Exp && !(decay > 0 && decay < 1)) fail("decay", decay, "in (0, 1)");
-    if (minHits < 1 || minHits > 64) fail("min_hits", minHits, "1..64");
-    if (threads < 0) fail("threads", threads, ">= 0 (0 = all cores)");
-    if (coveredRun < 1) fail("covered run", coveredRun, ">= 1");
-    if (maxStreamline < 0) fail("max streamline", maxStreamline, ">= 0");
-    if (brick != 0 && (brick < 8 || brick > 512 || brick % 8 != 0))
-        fail("brick", brick, "a multiple of 8 in 8..512 output voxels (0 = automatic)");
-    if (stride < 0 || stride > 64) fail("stride", stride, "0..64 samples per integration step (0 = automatic)");
+    return engineInfo(settings.engine).spotReach(settings, maxSpotRadius);
+}
+
+double fieldReach(const LicSettings& settings, bool spots, double maxSpotRadius, int stride)
+{
+    return engineInfo(settings.engine).fieldReach(settings, spots, maxSpotRadius, stride);
+}
+
+LicStats convolveNoiseBricks(const ConvolveJob& job, NoiseBrickSource& noise, const BrickSink& sink)
+{
+    job.settings.validate();
+    const EngineInfo& e = engineInfo(job.settings.engine);
+    if (!e.noiseBricks) {
+        throw InputError(std::string("engine \"") + e.name + "\" does not take noise input; use " + enginesTaking(false));
+    }
+    const ThreadLimit limit(job.settings.threads);
+    return e.noiseBricks(job, noise, sink);
+}
+
+LicStats convolveSpotBricks(const ConvolveJob& job, const SpotInput& spots, const BrickSink& sink)
+{
+    job.settings.validate();
+    if (spots.radii.empty() || spots.radii.size() > 4) {
+        throw InputError("input.radii has " + std::to_string(spots.radii.size()) +
+                         " radii; between 1 and 4 width levels are supported");
+    }
+    const EngineInfo& e = engineInfo(job.settings.engine);
+    if (!e.spotBricks) {
+        throw InputError(std::string("engine \"") + e.name + "\" does not take spot input; use " + enginesTaking(true));
+    }
+    const ThreadLimit limit(job.settings.threads);
+    return e.spotBricks(job, spots, sink);
+}
+
+LicResult convolveSpots(const VelocityField& field, const OutputDomain& domain, const SpotSet& spots,
+                        const std::vector<double>& radii, double haloScale, const LicSettings& settings,
+                        Progress& progress)
+{
+    settings.validate();
+    const BrickLayout layout(domain, brickDim(settings));
+    LicResult result;
+    result.channels.assign(std::size_t(settings.outputChannels(2 * int(radii.size()))),
+                           std::vector<float>(domain.slotCount(), 0.0f));
+    result.stats = convolveSpotBricks({field, domain, layout, settings, progress}, {spots, radii, haloScale},
+                                      [&](const BrickChannels& bc) { detail::copyBrick(bc, result.channels); });
+    return result;
 }
 
 namespace detail {
 
-TraceSettings traceSettings(const VelocityField& field, const OutputDomain& domain,
-                            const LicSettings& settings)
+void copyBrick(const BrickChannels& bc, std::vector<std::vector<float>>& channels)
 {
-    const double vs = domain.voxelSize();
-    TraceSettings ts;
-    ts.step = settings.step * vs;
-    ts.maxSamples = settings.halfSamples();
-    ts.integrator = settings.integrator;
-    ts.tolerance = settings.tolerance * vs;
-    ts.maxStep = std::max(ts.step, 2.0 * vs);
-    ts.minSpeed = field.maxSpeed() * 1e-6;
-    return ts;
-}
-
-void windowSums(KernelType kernel, double decay, int n, std::size_t N, int W, const double* vals,
-                double* win, double* norm, std::vector<double>& scratch)
-{
-    const std::size_t nn = std::size_t(n);
-    if (kernel == KernelType::Box) {
-        scratch.assign((N + 1) * std::size_t(W), 0.0); // prefix sums
-        for (std::size_t i = 0; i < N; ++i)
-            for (int c = 0; c < W; ++c) scratch[(i + 1) * W + c] = scratch[i * W + c] + vals[i * W + c];
-        for (std::size_t i = 0; i < N; ++i) {
-            const std::size_t a = i >= nn ? i - nn : 0, b = std::min(N - 1, i + nn);
-            for (int c = 0; c < W; ++c) win[i * W + c] = scratch[(b + 1) * W + c] - scratch[a * W + c];
-            norm[i] = double(b - a + 1);
-        }
-        return;
+    for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i) {
+        if (bc.blockTouched && !bc.blockTouched[i]) continue;
+        const std::size_t slot0 = std::size_t(bc.brick->blocks[i]) * OutputDomain::kBlockVoxels;
+        for (int c = 0; c < bc.channels; ++c)
+            std::copy_n(bc.block(i, c), OutputDomain::kBlockVoxels,
+                        channels[std::size_t(c)].begin() + std::ptrdiff_t(slot0));
     }
-    scratch.assign((N + 1) * std::size_t(W), 0.0); // E_i, with E_N = 0
-    for (std::size_t i = N; i-- > 0;)
-        for (int c = 0; c < W; ++c) scratch[i * W + c] = vals[i * W + c] + decay * scratch[(i + 1) * W + c];
-    const double cn1 = std::pow(decay, double(n + 1));
-    for (std::size_t i = 0; i < N; ++i) {
-        const std::size_t end = i + nn + 1; // first sample past the window
-        for (int c = 0; c < W; ++c)
-            win[i * W + c] = scratch[i * W + c] - (end < N ? cn1 * scratch[end * W + c] : 0.0);
-        const double K = double(std::min(nn, N - 1 - i)); // window is samples i … i+K
-        norm[i] = (1.0 - std::pow(decay, K + 1.0)) / (1.0 - decay);
-    }
-}
-
-int ripplePeriod(const LicSettings& settings)
-{
-    // One ripple per window, either kernel: the 2n+1 samples of a box window, the n+1 of an exp one.
-    const int n = settings.halfSamples();
-    return settings.kernel == KernelType::Box ? 2 * n + 1 : n + 1;
-}
-
-int integrationStride(const OutputDomain& domain, const LicSettings& settings)
-{
-    if (settings.stride > 0) return settings.stride;
-    // About one field voxel per RK4 step (the trilinear field has no detail finer than that).
-    return std::clamp(int(std::floor(double(domain.upsample()) / settings.step + 1e-9)), 1, 8);
 }
 
 } // namespace detail

@@ -1,5 +1,7 @@
 #include "lic/engine/Splat.h"
 
+#include "lic/engine/Kernels.h"
+
 #include "lic/util/Error.h"
 #include "lic/util/Parallel.h"
 
@@ -230,115 +232,164 @@ struct SplatScratch
 
 } // namespace
 
-LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
-                         const SpotSet& spots, const std::vector<double>& radii, double haloScale,
-                         const LicSettings& settings, Progress& progress, const BrickSink& sink)
+namespace {
+
+/// Rasterise around every kCoarse-th sample of a spot's line (2 voxels apart at h = ½).
+constexpr int kCoarse = 4;
+
+/// Half-width along the line of the slab around a coarse sample that the rasteriser covers.
+double slabHalf(double h) { return 0.5 * kCoarse * h + 0.5; }
+
+bool naturalEnd(StopReason w) { return w == StopReason::Boundary || w == StopReason::ZeroVelocity; }
+
+/// One splat convolution: the spots' lines (traced once), which spots reach which brick, and each
+/// brick's deposits.
+class SplatRun
 {
-    settings.validate();
-    if (radii.empty() || radii.size() > 4) {
-        throw InputError("input.radii has " + std::to_string(radii.size()) +
-                         " radii; between 1 and 4 width levels are supported");
+public:
+    SplatRun(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout, const SpotSet& spots,
+             const std::vector<double>& channelRadii, const LicSettings& settings)
+        : mField(field)
+        , mDomain(domain)
+        , mLayout(layout)
+        , mSpots(spots)
+        , mSettings(settings)
+        , mTables(channelRadii, settings)
+        , mC(int(channelRadii.size()))
+        , mK(settings.outputChannels(int(channelRadii.size())))
+        , mH(settings.step)
+        , mWin(windowOf(settings))
+        , mWinTotal(mWin.total())
+        , mTheta(detail::rippleStep(settings))
+        , mWholeNorm(rippleNorm(mWin, mTheta, mWin.lo, mWin.hi)) // box: (0, 0)
+        , mReach(mTables.reach())
+        , mRho(std::sqrt(mReach * mReach + slabHalf(mH) * slabHalf(mH)) + 0.25)
+    {
     }
-    const auto start = std::chrono::steady_clock::now();
-    std::vector<double> channelRadii(radii);
-    for (double r : radii) channelRadii.push_back(r * haloScale);
-    const int C = int(channelRadii.size());
-    const int K = settings.ripple ? 3 * C + 2 : C;
-    const double h = settings.step;
-    const Window win = windowOf(settings);
-    const double winTotal = win.total();
-    const double theta = detail::rippleStep(settings);
-    const std::array<double, 2> wholeNorm = rippleNorm(win, theta, win.lo, win.hi); // box: (0, 0)
-    constexpr std::size_t V = OutputDomain::kBlockVoxels;
 
-    progress.begin("splat", domain.activeVoxelCount());
-    const SplatTables tables(channelRadii, settings);
-    const double reach = tables.reach();
+    /// 1. Trace every spot's streamline over the kernel's support (independent per spot).
+    std::uint64_t traceLines();
+    /// 2. Which spots reach which brick (in spot order), per brick position in the layout.
+    std::vector<std::vector<std::uint32_t>> spotsPerBrick() const;
+    /// 3. Deposit the footprints of `spotIds` into the brick's own voxels; hand it to `sink`.
+    void brick(const Brick& brick, const std::vector<std::uint32_t>& spotIds, SplatScratch& sc,
+               const BrickSink& sink) const;
 
-    // 1. Trace every spot's streamline over the kernel's support (independent per spot).
-    TraceSettings ts = detail::traceSettings(field, domain, settings);
-    ts.maxSamples = int(std::ceil((std::max(-tables.tauMin(), tables.tauMax()) + 1.0) / h));
-    const int stride = detail::integrationStride(domain, settings);
-    const double up = double(domain.upsample()), upOff = 0.5 * (up - 1.0);
-    std::vector<std::vector<openvdb::Vec3f>> linePts(spots.centers.size());
-    std::vector<std::vector<Xform>> lineXf(spots.centers.size());
-    std::vector<SpotLine> lines(spots.centers.size());
-    const double hWorld = h * domain.voxelSize();
-    detail::runWithThreads(settings.threads, [&] {
-        tbb::enumerable_thread_specific<std::pair<std::vector<openvdb::Vec3f>, std::vector<openvdb::Vec3d>>> tls;
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, spots.centers.size(), 64), [&](const auto& r) {
-            auto& [back, scratch] = tls.local();
-            for (std::size_t s = r.begin(); s != r.end(); ++s) {
-                const openvdb::Vec3d& c = spots.centers[s];
-                std::vector<openvdb::Vec3f>& pts = linePts[s];
-                back.clear();
-                pts.clear();
-                auto toOut = [&](const openvdb::Vec3d& p) {
-                    return openvdb::Vec3f(float(p[0] * up + upOff), float(p[1] * up + upOff), float(p[2] * up + upOff));
-                };
-                const openvdb::Vec3d seedIdx((c[0] - upOff) / up, (c[1] - upOff) / up, (c[2] - upOff) / up);
-                const auto [whyB, whyF] = traceIndexPair(
-                    field, seedIdx, ts, stride, scratch,
-                    [&](const openvdb::Vec3d& p) { back.push_back(toOut(p)); return true; },
-                    [&](const openvdb::Vec3d& p) { pts.push_back(toOut(p)); return true; });
-                // Assemble upstream … spot … downstream.
-                std::vector<openvdb::Vec3f> all(back.rbegin(), back.rend());
-                all.push_back(openvdb::Vec3f(float(c[0]), float(c[1]), float(c[2])));
-                all.insert(all.end(), pts.begin(), pts.end());
-                SpotLine& L = lines[s];
-                L.count = int(all.size());
-                L.centre = int(back.size());
-                auto natural = [](StopReason w) { return w == StopReason::Boundary || w == StopReason::ZeroVelocity; };
-                // The wall (or critical point) lies between the last sample and the next one: take
-                // the middle, so a voxel's window is cut where, on average, its own line ends.
-                if (natural(whyB)) L.endBack = -(double(back.size()) + 0.5) * h;
-                if (natural(whyF)) L.endFwd = (double(pts.size()) + 0.5) * h;
-                L.lo = L.hi = all.front();
-                for (const auto& p : all) {
-                    L.lo = openvdb::math::minComponent(L.lo, p);
-                    L.hi = openvdb::math::maxComponent(L.hi, p);
-                }
-                const int cn = std::min(L.count - 1, L.centre + 1), cp = std::max(0, L.centre - 1);
-                L.tangent = all[std::size_t(cn)] - all[std::size_t(cp)];
-                if (L.tangent.length() > 0) L.tangent.normalize();
-                transports(field, domain, all, L.centre, hWorld, lineXf[s]);
-                pts.swap(all);
-            }
-        });
+private:
+    void traceLine(std::size_t s, std::vector<openvdb::Vec3f>& back, std::vector<openvdb::Vec3d>& scratch,
+                   std::vector<openvdb::Vec3f>& pts, std::vector<Xform>& xf);
+    void prepareBrick(const Brick& brick, SplatScratch& sc) const;
+    /// The nearest point of spot line L to every voxel of the brick within reach of it.
+    void nearestPoints(const SpotLine& L, const Brick& brick, SplatScratch& sc) const;
+    /// Add the spot's footprint at every voxel nearestPoints() found; returns the deposits.
+    std::uint64_t depositSpot(const SpotLine& L, float weight, SplatScratch& sc) const;
+    void handOver(const Brick& brick, SplatScratch& sc, const BrickSink& sink) const;
+
+    const VelocityField& mField;
+    const OutputDomain& mDomain;
+    const BrickLayout& mLayout;
+    const SpotSet& mSpots;
+    const LicSettings& mSettings;
+    const SplatTables mTables;
+    const int mC, mK;
+    const double mH;
+    const Window mWin;
+    const double mWinTotal, mTheta;
+    const std::array<double, 2> mWholeNorm;
+    const double mReach, mRho;
+    TraceSettings mTrace; // along a spot's line: over the kernel's support each way
+    int mStride = 1;
+    std::vector<SpotLine> mLines;
+    std::vector<openvdb::Vec3f> mPoints, mTangents; // every line's samples, packed
+    std::vector<Xform> mXforms;
+};
+
+std::uint64_t SplatRun::traceLines()
+{
+    const std::size_t n = mSpots.centers.size();
+    mTrace = detail::traceSettings(mField, mDomain, mSettings);
+    mTrace.maxSamples = int(std::ceil((std::max(-mTables.tauMin(), mTables.tauMax()) + 1.0) / mH));
+    mStride = detail::integrationStride(mDomain, mSettings);
+    std::vector<std::vector<openvdb::Vec3f>> linePts(n);
+    std::vector<std::vector<Xform>> lineXf(n);
+    mLines.assign(n, SpotLine{});
+    tbb::enumerable_thread_specific<std::pair<std::vector<openvdb::Vec3f>, std::vector<openvdb::Vec3d>>> tls;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
+        auto& [back, scratch] = tls.local();
+        for (std::size_t s = r.begin(); s != r.end(); ++s) traceLine(s, back, scratch, linePts[s], lineXf[s]);
     });
-    std::vector<openvdb::Vec3f> points, tangents;
-    std::vector<Xform> xforms;
     std::uint64_t samples = 0;
-    for (std::size_t s = 0; s < lines.size(); ++s) {
-        lines[s].first = points.size();
-        points.insert(points.end(), linePts[s].begin(), linePts[s].end());
-        xforms.insert(xforms.end(), lineXf[s].begin(), lineXf[s].end());
+    for (std::size_t s = 0; s < n; ++s) {
+        mLines[s].first = mPoints.size();
+        mPoints.insert(mPoints.end(), linePts[s].begin(), linePts[s].end());
+        mXforms.insert(mXforms.end(), lineXf[s].begin(), lineXf[s].end());
         // Unit direction at every sample (central differences; one-sided at the ends).
         const std::vector<openvdb::Vec3f>& p = linePts[s];
         for (int j = 0; j < int(p.size()); ++j) {
             openvdb::Vec3f t = p[std::size_t(std::min(int(p.size()) - 1, j + 1))] - p[std::size_t(std::max(0, j - 1))];
             const float tl = t.length();
-            tangents.push_back(tl > 0 ? t / tl : openvdb::Vec3f(0.0f));
+            mTangents.push_back(tl > 0 ? t / tl : openvdb::Vec3f(0.0f));
         }
-        samples += std::uint64_t(lines[s].count);
+        samples += std::uint64_t(mLines[s].count);
         std::vector<openvdb::Vec3f>().swap(linePts[s]);
         std::vector<Xform>().swap(lineXf[s]);
     }
+    return samples;
+}
 
-    // 2. Which spots reach which brick (in spot order).
-    const int dim = layout.dim();
+void SplatRun::traceLine(std::size_t s, std::vector<openvdb::Vec3f>& back, std::vector<openvdb::Vec3d>& scratch,
+                         std::vector<openvdb::Vec3f>& pts, std::vector<Xform>& xf)
+{
+    const double h = mH, up = double(mDomain.upsample()), upOff = 0.5 * (up - 1.0);
+    const openvdb::Vec3d& c = mSpots.centers[s];
+    back.clear();
+    pts.clear();
+    auto toOut = [&](const openvdb::Vec3d& p) {
+        return openvdb::Vec3f(float(p[0] * up + upOff), float(p[1] * up + upOff), float(p[2] * up + upOff));
+    };
+    const openvdb::Vec3d seedIdx((c[0] - upOff) / up, (c[1] - upOff) / up, (c[2] - upOff) / up);
+    const auto [whyB, whyF] = traceIndexPair(
+        mField, seedIdx, mTrace, mStride, scratch,
+        [&](const openvdb::Vec3d& p) { back.push_back(toOut(p)); return true; },
+        [&](const openvdb::Vec3d& p) { pts.push_back(toOut(p)); return true; });
+    // Assemble upstream … spot … downstream.
+    std::vector<openvdb::Vec3f> all(back.rbegin(), back.rend());
+    all.push_back(openvdb::Vec3f(float(c[0]), float(c[1]), float(c[2])));
+    all.insert(all.end(), pts.begin(), pts.end());
+    SpotLine& L = mLines[s];
+    L.count = int(all.size());
+    L.centre = int(back.size());
+    // The wall (or critical point) lies between the last sample and the next one: take the
+    // middle, so a voxel's window is cut where, on average, its own line ends.
+    if (naturalEnd(whyB)) L.endBack = -(double(back.size()) + 0.5) * h;
+    if (naturalEnd(whyF)) L.endFwd = (double(pts.size()) + 0.5) * h;
+    L.lo = L.hi = all.front();
+    for (const auto& p : all) {
+        L.lo = openvdb::math::minComponent(L.lo, p);
+        L.hi = openvdb::math::maxComponent(L.hi, p);
+    }
+    const int cn = std::min(L.count - 1, L.centre + 1), cp = std::max(0, L.centre - 1);
+    L.tangent = all[std::size_t(cn)] - all[std::size_t(cp)];
+    if (L.tangent.length() > 0) L.tangent.normalize();
+    transports(mField, mDomain, all, L.centre, h * mDomain.voxelSize(), xf);
+    pts.swap(all);
+}
+
+std::vector<std::vector<std::uint32_t>> SplatRun::spotsPerBrick() const
+{
+    const int dim = mLayout.dim();
     std::map<openvdb::Coord, std::size_t> brickAt;
-    for (std::size_t b = 0; b < layout.size(); ++b) {
-        const openvdb::Coord& o = layout[b].box.min();
+    for (std::size_t b = 0; b < mLayout.size(); ++b) {
+        const openvdb::Coord& o = mLayout[b].box.min();
         brickAt[openvdb::Coord(detail::floorDiv(o[0], dim), detail::floorDiv(o[1], dim), detail::floorDiv(o[2], dim))] = b;
     }
-    std::vector<std::vector<std::uint32_t>> spotsOf(layout.size());
-    for (std::size_t s = 0; s < lines.size(); ++s) {
-        const SpotLine& L = lines[s];
+    std::vector<std::vector<std::uint32_t>> spotsOf(mLayout.size());
+    for (std::size_t s = 0; s < mLines.size(); ++s) {
+        const SpotLine& L = mLines[s];
         openvdb::Coord lo, hi;
         for (int a = 0; a < 3; ++a) {
-            lo[a] = detail::floorDiv(int(std::floor(L.lo[a] - reach - 1.0)), dim);
-            hi[a] = detail::floorDiv(int(std::ceil(L.hi[a] + reach + 1.0)), dim);
+            lo[a] = detail::floorDiv(int(std::floor(L.lo[a] - mReach - 1.0)), dim);
+            hi[a] = detail::floorDiv(int(std::ceil(L.hi[a] + mReach + 1.0)), dim);
         }
         for (int x = lo[0]; x <= hi[0]; ++x)
             for (int y = lo[1]; y <= hi[1]; ++y)
@@ -346,187 +397,236 @@ LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain,
                     if (auto it = brickAt.find(openvdb::Coord(x, y, z)); it != brickAt.end())
                         spotsOf[it->second].push_back(std::uint32_t(s));
     }
+    return spotsOf;
+}
 
-    // 3. Each brick deposits the footprints of its spots into its own voxels.
-    constexpr int kCoarse = 4; // rasterise around every 4th sample (2 voxels apart at h = ½)
-    // A voxel within reach of the line inside a coarse sample's slab (half-width S·h/2 + ½ along
-    // the line) lies within √(reach² + slab²) of that sample.
-    const double slabHalf = 0.5 * kCoarse * h + 0.5;
-    const double rho = std::sqrt(reach * reach + slabHalf * slabHalf) + 0.25;
-    tbb::enumerable_thread_specific<SplatScratch> scratch;
-    auto runBrick = [&](std::size_t b) {
-        SplatScratch& sc = scratch.local();
-        const Brick& brick = layout[b];
-        sc.index = BrickIndex(domain, brick, dim);
-        const BrickIndex& bi = sc.index;
-        const std::size_t voxels = bi.voxels(), blocks = voxels / V;
-        sc.acc.resize(voxels * std::size_t(K));
-        sc.nearest.resize(voxels);
-        sc.stamp.resize(voxels, 0);
-        sc.best.resize(voxels);
-        sc.arc.resize(voxels);
-        sc.offset.resize(voxels);
-        sc.foot.resize(voxels);
-        sc.dirty.assign(blocks, 0);
-        sc.parts.resize(std::size_t(tables.parts()));
-        const openvdb::Coord bmin = brick.box.min(), bmax = brick.box.max();
-        std::uint64_t deposits = 0;
-        for (std::uint32_t s : spotsOf[b]) {
-            const SpotLine& L = lines[s];
-            const openvdb::Vec3f* P = &points[L.first];
-            if (++sc.generation == 0) { // wrapped: forget every stamp
-                std::fill(sc.stamp.begin(), sc.stamp.end(), 0);
-                sc.generation = 1;
-            }
-            const std::uint32_t gen = sc.generation;
-            sc.touched.clear();
-            // Nearest point of the line to voxel v, searched on the segments beside the sample
-            // that v's projection on the line's local direction at sample j points to.
-            // The voxel's nearest point on the line, near sample j: the voxel's projection on the
-            // local direction at j picks the sample jf, then the distance to the line through
-            // P_jf along its direction (samples are h apart, so this is the segment distance to
-            // within h²/8). All in float: positions are output index units.
-            const openvdb::Vec3f* T = &tangents[L.first];
-            for (int j = 0;; j = std::min(j + kCoarse, L.count - 1)) {
-                const openvdb::Vec3f c = P[j], dir = T[j];
-                const bool end = j == 0 || j == L.count - 1;
-                const float slab = 0.5f * float(kCoarse * h) + 0.5f, invH = float(1.0 / h);
-                const int x0 = std::max(bmin[0], int(std::ceil(c[0] - rho))), x1 = std::min(bmax[0], int(std::floor(c[0] + rho)));
-                for (int x = x0; x <= x1; ++x) {
-                    const float dx = float(x) - c[0], ry2 = float(rho * rho) - dx * dx;
-                    if (ry2 < 0) continue;
-                    const float ry = std::sqrt(ry2);
-                    const int y0 = std::max(bmin[1], int(std::ceil(c[1] - ry))), y1 = std::min(bmax[1], int(std::floor(c[1] + ry)));
-                    for (int y = y0; y <= y1; ++y) {
-                        const float dy = float(y) - c[1], rz2 = ry2 - dy * dy;
-                        if (rz2 < 0) continue;
-                        const float rz = std::sqrt(rz2);
-                        const int z0 = std::max(bmin[2], int(std::ceil(c[2] - rz))), z1 = std::min(bmax[2], int(std::floor(c[2] + rz)));
-                        const float pxy = dx * dir[0] + dy * dir[1];
-                        for (int z = z0; z <= z1; ++z) {
-                            const float along = pxy + (float(z) - c[2]) * dir[2];
-                            if (!end && std::abs(along) > slab) continue;
-                            const std::int64_t l = bi.localOf(openvdb::Coord(x, y, z));
-                            if (l < 0) continue;
-                            const int jf = std::clamp(j + int(std::floor(along * invH + 0.5f)), 0, L.count - 1);
-                            const openvdb::Vec3f w = openvdb::Vec3f(float(x), float(y), float(z)) - P[jf];
-                            const float a = w.dot(T[jf]);
-                            const float d2 = w.lengthSqr() - a * a;
-                            const std::size_t li = std::size_t(l);
-                            const bool fresh = sc.stamp[li] != gen;
-                            if (fresh || d2 < sc.best[li]) {
-                                if (fresh) sc.touched.push_back(l);
-                                sc.stamp[li] = gen;
-                                sc.best[li] = d2;
-                                sc.arc[li] = float(double(jf - L.centre) * h) + a;
-                                sc.offset[li] = w - T[jf] * a;
-                                sc.foot[li] = jf;
-                            }
-                        }
+void SplatRun::prepareBrick(const Brick& brick, SplatScratch& sc) const
+{
+    constexpr std::size_t V = OutputDomain::kBlockVoxels;
+    sc.index = BrickIndex(mDomain, brick, mLayout.dim());
+    const std::size_t voxels = sc.index.voxels(), blocks = voxels / V;
+    sc.acc.resize(voxels * std::size_t(mK));
+    sc.nearest.resize(voxels);
+    sc.stamp.resize(voxels, 0);
+    sc.best.resize(voxels);
+    sc.arc.resize(voxels);
+    sc.offset.resize(voxels);
+    sc.foot.resize(voxels);
+    sc.dirty.assign(blocks, 0);
+    sc.parts.resize(std::size_t(mTables.parts()));
+}
+
+void SplatRun::brick(const Brick& brick, const std::vector<std::uint32_t>& spotIds, SplatScratch& sc,
+                     const BrickSink& sink) const
+{
+    prepareBrick(brick, sc);
+    for (std::uint32_t s : spotIds) {
+        if (++sc.generation == 0) { // wrapped: forget every stamp
+            std::fill(sc.stamp.begin(), sc.stamp.end(), 0);
+            sc.generation = 1;
+        }
+        sc.touched.clear();
+        nearestPoints(mLines[s], brick, sc);
+        sc.stats.deposits += depositSpot(mLines[s], mSpots.weights[s], sc);
+    }
+    handOver(brick, sc, sink);
+}
+
+void SplatRun::nearestPoints(const SpotLine& L, const Brick& brick, SplatScratch& sc) const
+{
+    // The voxel's nearest point on the line, near sample j: the voxel's projection on the local
+    // direction at j picks the sample jf, then the distance to the line through P_jf along its
+    // direction (samples are h apart, so this is the segment distance to within h²/8). All in
+    // float: positions are output index units.
+    const openvdb::Vec3f* P = &mPoints[L.first];
+    const openvdb::Vec3f* T = &mTangents[L.first];
+    const BrickIndex& bi = sc.index;
+    const std::uint32_t gen = sc.generation;
+    const openvdb::Coord bmin = brick.box.min(), bmax = brick.box.max();
+    const double rho = mRho, h = mH;
+    for (int j = 0;; j = std::min(j + kCoarse, L.count - 1)) {
+        const openvdb::Vec3f c = P[j], dir = T[j];
+        const bool end = j == 0 || j == L.count - 1;
+        const float slab = 0.5f * float(kCoarse * h) + 0.5f, invH = float(1.0 / h);
+        const int x0 = std::max(bmin[0], int(std::ceil(c[0] - rho))), x1 = std::min(bmax[0], int(std::floor(c[0] + rho)));
+        for (int x = x0; x <= x1; ++x) {
+            const float dx = float(x) - c[0], ry2 = float(rho * rho) - dx * dx;
+            if (ry2 < 0) continue;
+            const float ry = std::sqrt(ry2);
+            const int y0 = std::max(bmin[1], int(std::ceil(c[1] - ry))), y1 = std::min(bmax[1], int(std::floor(c[1] + ry)));
+            for (int y = y0; y <= y1; ++y) {
+                const float dy = float(y) - c[1], rz2 = ry2 - dy * dy;
+                if (rz2 < 0) continue;
+                const float rz = std::sqrt(rz2);
+                const int z0 = std::max(bmin[2], int(std::ceil(c[2] - rz))), z1 = std::min(bmax[2], int(std::floor(c[2] + rz)));
+                const float pxy = dx * dir[0] + dy * dir[1];
+                for (int z = z0; z <= z1; ++z) {
+                    const float along = pxy + (float(z) - c[2]) * dir[2];
+                    if (!end && std::abs(along) > slab) continue;
+                    const std::int64_t l = bi.localOf(openvdb::Coord(x, y, z));
+                    if (l < 0) continue;
+                    const int jf = std::clamp(j + int(std::floor(along * invH + 0.5f)), 0, L.count - 1);
+                    const openvdb::Vec3f w = openvdb::Vec3f(float(x), float(y), float(z)) - P[jf];
+                    const float a = w.dot(T[jf]);
+                    const float d2 = w.lengthSqr() - a * a;
+                    const std::size_t li = std::size_t(l);
+                    const bool fresh = sc.stamp[li] != gen;
+                    if (fresh || d2 < sc.best[li]) {
+                        if (fresh) sc.touched.push_back(l);
+                        sc.stamp[li] = gen;
+                        sc.best[li] = d2;
+                        sc.arc[li] = float(double(jf - L.centre) * h) + a;
+                        sc.offset[li] = w - T[jf] * a;
+                        sc.foot[li] = jf;
                     }
                 }
-                if (j == L.count - 1) break;
-            }
-            const float weight = spots.weights[s];
-            // A spot within reach of where its line ends: part of it lies beyond the wall, where
-            // no window sample can see it; sum its windows directly instead of from the tables.
-            const bool nearWall = L.endFwd < reach + h || L.endBack > -(reach + h);
-            const Xform* G = &xforms[L.first];
-            const openvdb::Vec3d t0(L.tangent);
-            for (std::int64_t l : sc.touched) {
-                const std::size_t li = std::size_t(l);
-                if (double(sc.best[li]) >= (reach + 2.0) * (reach + 2.0)) continue;
-                // The voxel's offset carried back along the line to the spot (linearised flow
-                // map): where the voxel's own streamline passes the spot. Its part across the
-                // line is the distance that decides the footprint, its part along the line shifts
-                // the window.
-                const Xform& g = G[sc.foot[li]];
-                const openvdb::Vec3f& o = sc.offset[li];
-                const openvdb::Vec3d d0(g[0] * o[0] + g[3] * o[1] + g[6] * o[2], g[1] * o[0] + g[4] * o[1] + g[7] * o[2],
-                                        g[2] * o[0] + g[5] * o[1] + g[8] * o[2]);
-                const double along = d0.dot(t0);
-                const double d = std::sqrt(std::max(0.0, d0.lengthSqr() - along * along));
-                const double tau = double(sc.arc[li]) + along;
-                if (d >= reach || tau < tables.tauMin() || tau > tables.tauMax()) continue;
-                // x's window is cut where the spot's line ends at a wall: renormalise.
-                int i0 = win.lo, i1 = win.hi;
-                if (L.endBack > -1e299) i0 = std::max(i0, int(std::ceil((L.endBack - tau) / h - 1e-9)));
-                if (L.endFwd < 1e299) i1 = std::min(i1, int(std::floor((L.endFwd - tau) / h + 1e-9)));
-                if (i1 < i0) continue;
-                double inside = winTotal;
-                if (i0 != win.lo || i1 != win.hi) {
-                    inside = 0;
-                    for (int i = i0; i <= i1; ++i) inside += win.weight(i);
-                }
-                const std::size_t lb = li / V;
-                if (!sc.dirty[lb]) {
-                    sc.dirty[lb] = 1;
-                    std::fill_n(sc.acc.begin() + std::ptrdiff_t(lb * V * std::size_t(K)), V * std::size_t(K), 0.0f);
-                    std::fill_n(sc.nearest.begin() + std::ptrdiff_t(lb * V), V, std::numeric_limits<float>::max());
-                }
-                std::fill(sc.parts.begin(), sc.parts.end(), 0.0f);
-                if (nearWall) tables.addDirect(tau, d, weight, i0, i1, inside, sc.parts.data());
-                else tables.add(tau, d, float(double(weight) * winTotal / inside), sc.parts.data());
-                float* acc = &sc.acc[li * std::size_t(K)];
-                for (int p = 0; p < tables.parts(); ++p) acc[p] += sc.parts[std::size_t(p)];
-                if (settings.ripple && float(d) < sc.nearest[li]) {
-                    // The window's own ripple normalisation (Σ e^{iθi} / N over the samples inside),
-                    // from the nearest spot line: 0 for a whole window.
-                    sc.nearest[li] = float(d);
-                    const std::array<double, 2> nz = (i0 != win.lo || i1 != win.hi) ? rippleNorm(win, theta, i0, i1) : wholeNorm;
-                    acc[3 * C] = float(nz[0]);
-                    acc[3 * C + 1] = float(nz[1]);
-                }
-                ++deposits;
             }
         }
-        sc.stats.deposits += deposits;
-        // Hand the brick's blocks over, channel-major per block; untouched blocks are flagged.
-        sc.out.resize(brick.blocks.size() * std::size_t(K) * V);
-        sc.blockTouched.assign(brick.blocks.size(), 0);
-        bool any = false;
-        for (std::size_t i = 0; i < brick.blocks.size(); ++i) {
-            const std::uint32_t blk = brick.blocks[i];
-            const std::size_t lb = bi.localBlock(domain.blockOrigin(blk));
-            if (!sc.dirty[lb]) continue;
-            sc.blockTouched[i] = 1;
-            any = true;
-            float* dst = sc.out.data() + i * std::size_t(K) * V;
-            const float* src = sc.acc.data() + lb * V * std::size_t(K);
-            for (std::size_t off = 0; off < V; ++off)
-                for (int k = 0; k < K; ++k) dst[std::size_t(k) * V + off] = src[off * std::size_t(K) + std::size_t(k)];
-        }
-        if (any) sink(BrickChannels{brick.id, &brick, K, sc.out.data(), sc.blockTouched.data()});
-    };
+        if (j == L.count - 1) break;
+    }
+}
 
+std::uint64_t SplatRun::depositSpot(const SpotLine& L, float weight, SplatScratch& sc) const
+{
+    constexpr std::size_t V = OutputDomain::kBlockVoxels;
+    const double reach = mReach, h = mH;
+    const Window& win = mWin;
+    const std::size_t K = std::size_t(mK);
+    // A spot within reach of where its line ends: part of it lies beyond the wall, where no window
+    // sample can see it; sum its windows directly instead of from the tables.
+    const bool nearWall = L.endFwd < reach + h || L.endBack > -(reach + h);
+    const Xform* G = &mXforms[L.first];
+    const openvdb::Vec3d t0(L.tangent);
+    std::uint64_t deposits = 0;
+    for (std::int64_t l : sc.touched) {
+        const std::size_t li = std::size_t(l);
+        if (double(sc.best[li]) >= (reach + 2.0) * (reach + 2.0)) continue;
+        // The voxel's offset carried back along the line to the spot (linearised flow map): where
+        // the voxel's own streamline passes the spot. Its part across the line is the distance
+        // that decides the footprint, its part along the line shifts the window.
+        const Xform& g = G[sc.foot[li]];
+        const openvdb::Vec3f& o = sc.offset[li];
+        const openvdb::Vec3d d0(g[0] * o[0] + g[3] * o[1] + g[6] * o[2], g[1] * o[0] + g[4] * o[1] + g[7] * o[2],
+                                g[2] * o[0] + g[5] * o[1] + g[8] * o[2]);
+        const double along = d0.dot(t0);
+        const double d = std::sqrt(std::max(0.0, d0.lengthSqr() - along * along));
+        const double tau = double(sc.arc[li]) + along;
+        if (d >= reach || tau < mTables.tauMin() || tau > mTables.tauMax()) continue;
+        // x's window is cut where the spot's line ends at a wall: renormalise.
+        int i0 = win.lo, i1 = win.hi;
+        if (L.endBack > -1e299) i0 = std::max(i0, int(std::ceil((L.endBack - tau) / h - 1e-9)));
+        if (L.endFwd < 1e299) i1 = std::min(i1, int(std::floor((L.endFwd - tau) / h + 1e-9)));
+        if (i1 < i0) continue;
+        double inside = mWinTotal;
+        if (i0 != win.lo || i1 != win.hi) {
+            inside = 0;
+            for (int i = i0; i <= i1; ++i) inside += win.weight(i);
+        }
+        const std::size_t lb = li / V;
+        if (!sc.dirty[lb]) {
+            sc.dirty[lb] = 1;
+            std::fill_n(sc.acc.begin() + std::ptrdiff_t(lb * V * K), V * K, 0.0f);
+            std::fill_n(sc.nearest.begin() + std::ptrdiff_t(lb * V), V, std::numeric_limits<float>::max());
+        }
+        std::fill(sc.parts.begin(), sc.parts.end(), 0.0f);
+        if (nearWall) mTables.addDirect(tau, d, weight, i0, i1, inside, sc.parts.data());
+        else mTables.add(tau, d, float(double(weight) * mWinTotal / inside), sc.parts.data());
+        float* acc = &sc.acc[li * K];
+        for (int p = 0; p < mTables.parts(); ++p) acc[p] += sc.parts[std::size_t(p)];
+        if (mSettings.ripple && float(d) < sc.nearest[li]) {
+            // The window's own ripple normalisation (Σ e^{iθi} / N over the samples inside), from
+            // the nearest spot line: 0 for a whole window.
+            sc.nearest[li] = float(d);
+            const std::array<double, 2> nz =
+                (i0 != win.lo || i1 != win.hi) ? rippleNorm(win, mTheta, i0, i1) : mWholeNorm;
+            acc[3 * mC] = float(nz[0]);
+            acc[3 * mC + 1] = float(nz[1]);
+        }
+        ++deposits;
+    }
+    return deposits;
+}
+
+void SplatRun::handOver(const Brick& brick, SplatScratch& sc, const BrickSink& sink) const
+{
+    // The brick's blocks, channel-major per block; untouched blocks are flagged.
+    constexpr std::size_t V = OutputDomain::kBlockVoxels;
+    const std::size_t K = std::size_t(mK);
+    sc.out.resize(brick.blocks.size() * K * V);
+    sc.blockTouched.assign(brick.blocks.size(), 0);
+    bool any = false;
+    for (std::size_t i = 0; i < brick.blocks.size(); ++i) {
+        const std::size_t lb = sc.index.localBlock(mDomain.blockOrigin(brick.blocks[i]));
+        if (!sc.dirty[lb]) continue;
+        sc.blockTouched[i] = 1;
+        any = true;
+        float* dst = sc.out.data() + i * K * V;
+        const float* src = sc.acc.data() + lb * V * K;
+        for (std::size_t off = 0; off < V; ++off)
+            for (std::size_t k = 0; k < K; ++k) dst[k * V + off] = src[off * K + k];
+    }
+    if (any) sink(BrickChannels{brick.id, &brick, mK, sc.out.data(), sc.blockTouched.data()});
+}
+
+} // namespace
+
+LicStats splatSpotBricks(const ConvolveJob& job, const SpotInput& in, const BrickSink& sink)
+{
+    const LicSettings& settings = job.settings;
+    settings.validate();
+    if (in.radii.empty() || in.radii.size() > 4) {
+        throw InputError("input.radii has " + std::to_string(in.radii.size()) +
+                         " radii; between 1 and 4 width levels are supported");
+    }
+    const ThreadLimit limit(settings.threads);
+    const auto start = std::chrono::steady_clock::now();
+    std::vector<double> channelRadii(in.radii);
+    for (double r : in.radii) channelRadii.push_back(r * in.haloScale);
+    job.progress.begin("splat", job.domain.activeVoxelCount());
+    SplatRun run(job.field, job.domain, job.layout, in.spots, channelRadii, settings);
+    const std::uint64_t samples = run.traceLines();
+    const std::vector<std::vector<std::uint32_t>> spotsOf = run.spotsPerBrick();
     std::vector<std::size_t> busy;
-    for (std::size_t b = 0; b < layout.size(); ++b) {
-        if (spotsOf[b].empty()) progress.advance(layout[b].activeVoxels); // nothing reaches it
+    for (std::size_t b = 0; b < job.layout.size(); ++b) {
+        if (spotsOf[b].empty()) job.progress.advance(job.layout[b].activeVoxels); // nothing reaches it
         else busy.push_back(b);
     }
-    detail::runWithThreads(settings.threads, [&] {
-        tbb::parallel_for(
-            tbb::blocked_range<std::size_t>(0, busy.size(), 1),
-            [&](const tbb::blocked_range<std::size_t>& r) {
-                for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                    detail::checkCancel(progress);
-                    tbb::this_task_arena::isolate([&] { runBrick(busy[i]); });
-                    progress.advance(layout[busy[i]].activeVoxels);
-                }
-            },
-            tbb::simple_partitioner());
-    });
-    progress.end();
-
-    LicStats stats;
-    for (const SplatScratch& sc : scratch) stats.deposits += sc.stats.deposits;
-    stats.voxels = domain.activeVoxelCount();
-    stats.streamlines = spots.centers.size();
+    LicStats stats = detail::forEachBrick<SplatScratch>(
+        job.layout, busy, job.progress, true,
+        [&](std::size_t b, const Brick& brick, SplatScratch& sc) { run.brick(brick, spotsOf[b], sc, sink); });
+    job.progress.end();
+    stats.voxels = job.domain.activeVoxelCount();
+    stats.streamlines = in.spots.centers.size();
     stats.samples = samples;
     stats.bricks = busy.size();
-    stats.brickDim = dim;
+    stats.brickDim = job.layout.dim();
     stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return stats;
+}
+
+int splatBrickDim(const LicSettings&)
+{
+    // No window tails at brick faces (a footprint crossing a face is rasterised by each brick it
+    // reaches, from one trace), so bricks stay at 64³ for load balance.
+    return 64;
+}
+
+double splatSpotReach(const LicSettings& settings, double maxSpotRadius)
+{
+    // The spot's own line runs n·h + R (+ a sample) each way, and deposits within √(R² + slab²)
+    // of its coarse samples (SplatRun::nearestPoints).
+    const double R = maxSpotRadius + 0.5, slab = slabHalf(settings.step);
+    return double(ghostMargin(settings)) + R + 1.0 + settings.step + std::sqrt(R * R + slab * slab) + 1.25;
+}
+
+double splatFieldReach(const LicSettings& settings, bool, double maxSpotRadius, int stride)
+{
+    // Every spot within splatSpotReach() is traced over its whole support (n·h + R each way)
+    // from its centre, and the flow map carried along it needs derivatives: its whole line must
+    // see the whole field's values, or its window would be cut elsewhere.
+    const double integration = std::max({double(stride) * settings.step, 2.0, settings.step}) + 1.0;
+    return splatSpotReach(settings, maxSpotRadius) + double(ghostMargin(settings)) + maxSpotRadius + 0.5 +
+           settings.step + integration + 2.0;
 }
 
 } // namespace lic

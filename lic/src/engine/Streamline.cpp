@@ -1,13 +1,20 @@
 #include "lic/engine/Streamline.h"
 
 #include "lic/util/Error.h"
+#include "lic/util/Names.h"
 
 #include <algorithm>
 #include <cmath>
 
 namespace lic {
 
-const char* toString(Integrator i) { return i == Integrator::RK45 ? "rk45" : "rk4"; }
+namespace {
+constexpr EnumName<Integrator> kIntegratorNames[] = {{Integrator::RK4, "rk4"}, {Integrator::RK45, "rk45"}};
+} // namespace
+
+std::span<const EnumName<Integrator>> integratorNames() { return kIntegratorNames; }
+
+const char* toString(Integrator i) { return nameOf<Integrator>(kIntegratorNames, i); }
 
 const char* toString(StopReason r)
 {
@@ -22,9 +29,7 @@ const char* toString(StopReason r)
 
 Integrator integratorFromString(const std::string& s)
 {
-    if (s == "rk4") return Integrator::RK4;
-    if (s == "rk45") return Integrator::RK45;
-    throw InputError("integrator \"" + s + "\" is unknown; expected rk4 or rk45");
+    return valueOf<Integrator>(kIntegratorNames, s, "integrator");
 }
 
 namespace detail {

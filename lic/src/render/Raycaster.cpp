@@ -1,6 +1,7 @@
 #include "lic/render/Raycaster.h"
 
 #include "lic/util/Error.h"
+#include "lic/util/Names.h"
 #include "lic/util/Parallel.h"
 
 #include <openvdb/tools/Dense.h>
@@ -68,29 +69,19 @@ openvdb::math::Ray<double> Camera::ray(double x, double y) const
     return openvdb::math::Ray<double>(position, d);
 }
 
-View viewFromString(const std::string& s)
-{
-    if (s == "front") return View::Front;
-    if (s == "back") return View::Back;
-    if (s == "left") return View::Left;
-    if (s == "right") return View::Right;
-    if (s == "top") return View::Top;
-    if (s == "bottom") return View::Bottom;
-    throw InputError("unknown view \"" + s + "\"; expected front, back, left, right, top or bottom");
-}
+namespace {
+constexpr EnumName<View> kViewNames[] = {{View::Front, "front"}, {View::Back, "back"},   {View::Left, "left"},
+                                         {View::Right, "right"}, {View::Top, "top"}, {View::Bottom, "bottom"}};
+constexpr EnumName<StereoMode> kStereoNames[] = {{StereoMode::None, "none"},
+                                                 {StereoMode::SideBySide, "sbs", "side by side"},
+                                                 {StereoMode::Anaglyph, "anaglyph"},
+                                                 {StereoMode::SideBySide, "side-by-side"},
+                                                 {StereoMode::None, ""}};
+} // namespace
 
-const char* toString(View v)
-{
-    switch (v) {
-    case View::Front: return "front";
-    case View::Back: return "back";
-    case View::Left: return "left";
-    case View::Right: return "right";
-    case View::Top: return "top";
-    case View::Bottom: return "bottom";
-    }
-    return "front";
-}
+View viewFromString(const std::string& s) { return valueOf<View>(kViewNames, s, "view"); }
+
+const char* toString(View v) { return nameOf<View>(kViewNames, v); }
 
 std::pair<double, double> viewAngles(View v)
 {
@@ -212,23 +203,9 @@ std::pair<Camera, Camera> stereoPair(const Camera& centre, double eyeSeparation)
 
 // ---- images ---------------------------------------------------------------------------------
 
-StereoMode stereoFromString(const std::string& s)
-{
-    if (s == "none" || s.empty()) return StereoMode::None;
-    if (s == "sbs" || s == "side-by-side") return StereoMode::SideBySide;
-    if (s == "anaglyph") return StereoMode::Anaglyph;
-    throw InputError("unknown stereo mode \"" + s + "\"; expected sbs (side by side) or anaglyph");
-}
+StereoMode stereoFromString(const std::string& s) { return valueOf<StereoMode>(kStereoNames, s, "stereo mode"); }
 
-const char* toString(StereoMode m)
-{
-    switch (m) {
-    case StereoMode::None: return "none";
-    case StereoMode::SideBySide: return "sbs";
-    case StereoMode::Anaglyph: return "anaglyph";
-    }
-    return "none";
-}
+const char* toString(StereoMode m) { return nameOf<StereoMode>(kStereoNames, m); }
 
 Image sideBySide(const Image& l, const Image& r)
 {
@@ -416,7 +393,8 @@ HaloRaycaster::HaloRaycaster(const RenderVolume& vol, const RenderSettings& sett
     m.extent = openvdb::Vec3d(dim[0] - 2, dim[1] - 2, dim[2] - 2);
     const std::size_t n = std::size_t(count);
 
-    detail::runWithThreads(settings.threads, [&] {
+    {
+        const ThreadLimit threadLimit(settings.threads);
         int stages = 1 + (vol.halo && settings.halos) + (vol.color || settings.colormap) + (vol.tangent || vol.flow);
         progress.begin("load", std::uint64_t(stages));
         m.density.assign(n, 0.0f);
@@ -528,7 +506,7 @@ HaloRaycaster::HaloRaycaster(const RenderVolume& vol, const RenderSettings& sett
             std::vector<float>().swap(m.density);
             std::vector<openvdb::Vec3s>().swap(m.tangent);
         }
-    });
+    }
 }
 
 HaloRaycaster::~HaloRaycaster() = default;
@@ -786,7 +764,8 @@ Image HaloRaycaster::render(const Camera& cam, Progress& progress, RenderStats* 
     std::atomic<std::uint64_t> rays{0}, samples{0}, skipped{0};
     std::atomic<bool> cancelled{false};
     progress.begin("render", std::uint64_t(cam.width) * std::uint64_t(cam.height));
-    detail::runWithThreads(mImpl->settings.threads, [&] {
+    {
+        const ThreadLimit threadLimit(mImpl->settings.threads);
         tbb::parallel_for(tbb::blocked_range<int>(0, tx * ty, 1), [&](const tbb::blocked_range<int>& r) {
             for (int t = r.begin(); t != r.end(); ++t) {
                 if (cancelled.load(std::memory_order_relaxed)) return;
@@ -804,7 +783,7 @@ Image HaloRaycaster::render(const Camera& cam, Progress& progress, RenderStats* 
                 progress.advance(std::uint64_t(x1 - x0) * std::uint64_t(y1 - y0));
             }
         }, tbb::simple_partitioner());
-    });
+    }
     if (cancelled) throw Cancelled();
     progress.end();
     if (stats) {

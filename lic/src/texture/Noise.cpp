@@ -1,17 +1,21 @@
 #include "lic/texture/Noise.h"
 
-#include "lic/engine/Engine.h"
 #include "lic/util/Error.h"
+#include "lic/util/Names.h"
 
 #include <tbb/parallel_for.h>
 
 namespace lic {
 
+namespace {
+constexpr EnumName<NoiseFilter> kFilterNames[] = {{NoiseFilter::Binomial, "binomial"}, {NoiseFilter::None, "none"}};
+} // namespace
+
+std::span<const EnumName<NoiseFilter>> noiseFilterNames() { return kFilterNames; }
+
 NoiseFilter noiseFilterFromString(const std::string& s)
 {
-    if (s == "binomial") return NoiseFilter::Binomial;
-    if (s == "none") return NoiseFilter::None;
-    throw InputError("noise filter \"" + s + "\" is unknown; expected binomial or none");
+    return valueOf<NoiseFilter>(kFilterNames, s, "noise filter");
 }
 
 NoiseTexture::NoiseTexture(std::uint64_t seed, const openvdb::CoordBBox& box, NoiseFilter filter)
@@ -87,13 +91,6 @@ void NoiseTexture::assign(std::uint64_t seed, const openvdb::CoordBBox& box, Noi
         std::vector<float>().swap(mRaw);
         std::vector<float>().swap(mPass);
     }
-}
-
-LicStats convolveNoiseBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
-                             NoiseBrickSource& noise, const LicSettings& settings, Progress& progress,
-                             const std::function<void(const BrickChannels&)>& sink)
-{
-    return convolveBricks(field, domain, layout, noise, settings, progress, sink);
 }
 
 } // namespace lic

@@ -1,8 +1,7 @@
 #include "lic/texture/Spots.h"
 
-#include "lic/engine/Splat.h"
-
 #include "lic/util/Error.h"
+#include "lic/util/Names.h"
 #include "lic/texture/Noise.h"
 
 #include <algorithm>
@@ -12,24 +11,20 @@ namespace lic {
 
 using openvdb::Vec3d;
 
-const char* toString(SpotDistribution d)
-{
-    switch (d) {
-    case SpotDistribution::Regular: return "regular";
-    case SpotDistribution::Random: return "random";
-    case SpotDistribution::Jittered: return "jittered";
-    case SpotDistribution::Poisson: return "poisson";
-    }
-    return "?";
-}
+namespace {
+constexpr EnumName<SpotDistribution> kDistributionNames[] = {{SpotDistribution::Regular, "regular"},
+                                                             {SpotDistribution::Random, "random"},
+                                                             {SpotDistribution::Jittered, "jittered"},
+                                                             {SpotDistribution::Poisson, "poisson"}};
+} // namespace
+
+std::span<const EnumName<SpotDistribution>> spotDistributionNames() { return kDistributionNames; }
+
+const char* toString(SpotDistribution d) { return nameOf<SpotDistribution>(kDistributionNames, d); }
 
 SpotDistribution spotDistributionFromString(const std::string& s)
 {
-    if (s == "regular") return SpotDistribution::Regular;
-    if (s == "random") return SpotDistribution::Random;
-    if (s == "jittered") return SpotDistribution::Jittered;
-    if (s == "poisson") return SpotDistribution::Poisson;
-    throw InputError("unknown spot distribution \"" + s + "\"; expected regular, random, jittered or poisson");
+    return valueOf<SpotDistribution>(kDistributionNames, s, "spot distribution");
 }
 
 namespace {
@@ -287,89 +282,6 @@ SpotStats spotStatistics(const std::vector<Vec3d>& spots, const openvdb::BBoxd& 
     st.axisPlaneCov = cov(axis);
     st.emptyAxisFraction = double(empty) / double(probes);
     return st;
-}
-
-double spotPeak(const LicSettings& settings, double radius)
-{
-    const int n = settings.halfSamples();
-    const double h = settings.step;
-    const int reach = int(std::ceil((radius + 1.0) / h)) + 1;
-    const int M = 2 * n + reach + 2;
-    const std::size_t N = std::size_t(2 * M + 1);
-    std::vector<double> vals(N), win(N), norm(N), scratch;
-    double peak = 0.0;
-    for (double phase : {0.0, 0.25, 0.5, 0.75}) {
-        for (std::size_t j = 0; j < N; ++j) {
-            double slope;
-            vals[j] = spotProfile(std::abs((double(j) - M + phase) * h), radius, slope);
-        }
-        detail::windowSums(settings.kernel, settings.decay, n, N, 1, vals.data(), win.data(), norm.data(), scratch);
-        // Interior windows only (complete on both sides).
-        for (std::size_t i = std::size_t(n); i + std::size_t(n) < N; ++i) peak = std::max(peak, win[i] / norm[i]);
-    }
-    return peak;
-}
-
-namespace {
-/// Call fn(texture) with the K-level spot texture, K = radii.size() in [1, 4].
-template<typename Fn>
-auto withSpotTexture(const SpotSet& spots, const std::vector<double>& radii, double haloScale, Fn&& fn)
-{
-    auto run = [&]<int K>() {
-        std::array<double, K> r{};
-        std::copy(radii.begin(), radii.end(), r.begin());
-        const SpotTexture<K> texture(spots, r, haloScale);
-        return fn(texture);
-    };
-    switch (radii.size()) {
-    case 1: return run.template operator()<1>();
-    case 2: return run.template operator()<2>();
-    case 3: return run.template operator()<3>();
-    case 4: return run.template operator()<4>();
-    default:
-        throw InputError("input.radii has " + std::to_string(radii.size()) +
-                         " radii; between 1 and 4 width levels are supported");
-    }
-}
-} // namespace
-
-LicResult convolveSpots(const VelocityField& field, const OutputDomain& domain, const SpotSet& spots,
-                        const std::vector<double>& radii, double haloScale, const LicSettings& settings,
-                        Progress& progress)
-{
-    if (settings.engine == EngineType::Splat) {
-        settings.validate();
-        const BrickLayout layout(domain, detail::brickDim(settings));
-        const int C = 2 * int(radii.size()), K = settings.ripple ? 3 * C + 2 : C;
-        LicResult result;
-        result.channels.assign(std::size_t(K), std::vector<float>(domain.slotCount(), 0.0f));
-        result.stats = splatSpotBricks(field, domain, layout, spots, radii, haloScale, settings, progress,
-                                       [&](const BrickChannels& bc) {
-                                           for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i) {
-                                               if (bc.blockTouched && !bc.blockTouched[i]) continue;
-                                               const std::size_t slot0 = std::size_t(bc.brick->blocks[i]) * OutputDomain::kBlockVoxels;
-                                               for (int c = 0; c < K; ++c)
-                                                   std::copy_n(bc.block(i, c), OutputDomain::kBlockVoxels,
-                                                               result.channels[std::size_t(c)].begin() + std::ptrdiff_t(slot0));
-                                           }
-                                       });
-        return result;
-    }
-    return withSpotTexture(spots, radii, haloScale,
-                           [&](const auto& texture) { return convolve(field, domain, texture, settings, progress); });
-}
-
-LicStats convolveSpotBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
-                            const SpotSet& spots, const std::vector<double>& radii, double haloScale,
-                            const LicSettings& settings, Progress& progress, const BrickSink& sink)
-{
-    if (settings.engine == EngineType::Splat)
-        return splatSpotBricks(field, domain, layout, spots, radii, haloScale, settings, progress, sink);
-    return withSpotTexture(spots, radii, haloScale, [&](const auto& texture) {
-        using Texture = std::remove_cvref_t<decltype(texture)>;
-        return convolveBricks(
-            field, domain, layout, [&](const Brick&) -> const Texture& { return texture; }, settings, progress, sink);
-    });
 }
 
 } // namespace lic

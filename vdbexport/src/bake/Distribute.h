@@ -14,7 +14,7 @@
 // every operation here is a no-op.
 #pragma once
 
-#include "lic/engine/Bricks.h"
+#include "lic/field/Bricks.h"
 #include "lic/util/Error.h"
 
 #include <openvdb/openvdb.h>

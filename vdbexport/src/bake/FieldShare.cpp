@@ -1,7 +1,7 @@
 #include "FieldShare.h"
 
 #include "Distribute.h"
-#include "Scalars.h"
+#include "lic/field/ScalarField.h"
 
 #include "io/DenseCommon.h"
 #include "vdbexport/io/VdbIO.h"
@@ -160,7 +160,7 @@ void readPart(const Plan& plan, int rank, int ranks, const std::string& velName,
     const int K = r.output.upsample;
     s.domain = std::make_unique<lic::OutputDomain>(*xform, box, *activity, K);
     activity.reset();
-    s.layout = std::make_unique<lic::BrickLayout>(*s.domain, lic::detail::brickDim(plan.settings));
+    s.layout = std::make_unique<lic::BrickLayout>(*s.domain, lic::brickDim(plan.settings));
     s.assignment = assignBricks(*s.layout, ranks);
     s.mine = bricksOf(s.assignment, rank);
 
@@ -188,7 +188,7 @@ void readPart(const Plan& plan, int rank, int ranks, const std::string& velName,
     if (!vel) throw lic::InputError("grid " + detail::q(velName) + " in " + detail::q(path) + " could not be read");
     vel->tree().clip(region);
     vel->setGridClass(gridClass);
-    setPartOf(*vel, box, region);
+    lic::setPartOf(*vel, box, region);
     s.extent.maxSpeed = localMaxSpeed(*vel);
     s.loaded.velocity = vel;
     s.loaded.gridName = velName;
@@ -208,7 +208,7 @@ void readPart(const Plan& plan, int rank, int ranks, const std::string& velName,
         auto g = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(name, worldBoxOf(*sx, part.expandBy(1))));
         if (!g) continue;
         g->tree().clip(part);
-        setPartOf(*g, wholeBox, part);
+        lic::setPartOf(*g, wholeBox, part);
         s.loaded.scalars.emplace(name, std::move(g));
     }
     file.close();
@@ -216,45 +216,16 @@ void readPart(const Plan& plan, int rank, int ranks, const std::string& velName,
 
 } // namespace
 
-double spotReach(const Plan& plan)
-{
-    const lic::LicSettings& st = plan.settings;
-    const Recipe& r = plan.recipe;
-    double R = 0.0; // the largest spot (halo) radius, with the profile's soft edge
-    for (double rad : r.input.radii) R = std::max(R, rad * r.input.haloScale);
-    R += 0.5;
-    const double ghost = double(lic::ghostMargin(st));
-    if (st.engine != lic::EngineType::Splat) return ghost + R + 2.0; // a voxel's window meets the spot
-    // Splat: the spot's own line runs n·h + R (+ a sample) each way, and deposits within
-    // √(R² + slab²) of its coarse samples (lic/src/engine/Splat.cpp).
-    const double slab = 2.0 * st.step + 0.5;
-    return ghost + R + 1.0 + st.step + std::sqrt(R * R + slab * slab) + 1.25;
-}
+double spotReach(const Plan& plan) { return lic::spotReach(plan.settings, plan.maxSpotRadius); }
 
 int fieldMargin(const Plan& plan, int upsample, int stride)
 {
-    const lic::LicSettings& st = plan.settings;
     const Recipe& r = plan.recipe;
-    // Output voxels past the brick: the ghost margin (the last texture sample, with its rounding
-    // and footprint), one integration step past the last sample (RK4 every `stride` samples,
-    // RK45 at most 2 voxels or a step), a voxel of rounding.
-    const double integration = std::max({double(stride) * st.step, 2.0, st.step}) + 1.0;
-    double out = double(lic::ghostMargin(st)) + integration;
-    if (plan.spots && st.engine == lic::EngineType::Splat) {
-        // Splat: every spot within spotReach() is traced over its whole support (n·h + R each
-        // way) from its centre, and the flow map carried along it needs derivatives: its whole
-        // line must see the whole field's values, or its window would be cut elsewhere.
-        double R = 0.0;
-        for (double rad : r.input.radii) R = std::max(R, rad * r.input.haloScale);
-        out = spotReach(plan) + double(lic::ghostMargin(st)) + R + 0.5 + st.step + integration + 2.0;
-    } else if (plan.spots) { // spots whose weights a brick's texture reads (ROI pre-mask at their centres)
-        double reach = 0.0;
-        for (double rad : r.input.radii) reach = std::max(reach, rad * r.input.haloScale);
-        out += reach + 1.5;
-    }
-    // Field voxels: that, one for the trilinear footprint and one for a staggered grid's next
-    // face; with scalars, two for a derived scalar's one-sided differences, two for the gradient
-    // of a scalar and one for the scalar probes' trilinear footprint.
+    // Output voxels past the brick at which the engine samples the field; then field voxels: that,
+    // one for the trilinear footprint and one for a staggered grid's next face; with scalars, two
+    // for a derived scalar's one-sided differences, two for the gradient of a scalar and one for
+    // the scalar probes' trilinear footprint.
+    const double out = lic::fieldReach(plan.settings, plan.spots, plan.maxSpotRadius, stride);
     const bool scalars = r.width || r.color || r.roi || r.input.surface;
     return int(std::ceil(out / upsample)) + 2 + (scalars ? 5 : 0);
 }
@@ -275,7 +246,7 @@ FieldShare readFieldShare(const Plan& plan, int rank, int ranks)
     s.loaded = loadField(r.field);
     s.field = std::make_unique<lic::VelocityField>(s.loaded.velocity);
     s.domain = std::make_unique<lic::OutputDomain>(*s.field, r.output.upsample);
-    s.layout = std::make_unique<lic::BrickLayout>(*s.domain, lic::detail::brickDim(plan.settings));
+    s.layout = std::make_unique<lic::BrickLayout>(*s.domain, lic::brickDim(plan.settings));
     s.assignment = assignBricks(*s.layout, ranks);
     s.mine = bricksOf(s.assignment, rank);
     const openvdb::Coord d = s.field->indexBBox().dim();

@@ -15,7 +15,7 @@
 
 #include "vdbexport/io/FieldInput.h"
 
-#include "lic/engine/Bricks.h"
+#include "lic/field/Bricks.h"
 #include "lic/field/Field.h"
 #include "lic/field/OutputDomain.h"
 

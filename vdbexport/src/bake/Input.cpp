@@ -1,6 +1,6 @@
 #include "Input.h"
 
-#include "lic/engine/Bricks.h"
+#include "lic/field/Bricks.h"
 #include "lic/util/Error.h"
 #include "lic/field/Region.h"
 
@@ -35,7 +35,7 @@ lic::SpotSet makeSpotSet(const Recipe& r, const lic::OutputDomain& domain, openv
                                    r.input.jitter, r.input.seed},
                                   box);
     }
-    std::optional<ScalarField> probe;
+    std::optional<lic::ScalarField> probe;
     if (roiPre) probe.emplace(roiPre);
     lic::SpotSet set;
     owned = 0;
@@ -55,7 +55,7 @@ lic::SpotSet makeSpotSet(const Recipe& r, const lic::OutputDomain& domain, openv
 
 } // namespace
 
-Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& scalars, const SpotShare* share,
+Input makeInput(const Plan& plan, const lic::OutputDomain& domain, lic::ScalarSet& scalars, const SpotShare* share,
                 lic::NoiseTexture::RawNoise raw)
 {
     const Recipe& r = plan.recipe;
@@ -69,7 +69,7 @@ Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& sc
     lic::NoiseBrickSource::Premask premask;
     if (plan.roiPre) {
         // Pre-mask: the noise itself is weighted, so the region's edge runs along the flow.
-        auto roi = std::make_shared<const ScalarField>(scalars.get(r.roi->scalar));
+        auto roi = std::make_shared<const lic::ScalarField>(scalars.get(r.roi->scalar));
         const std::array<double, 2> range = r.roi->range;
         premask = [roi, range, &domain](lic::NoiseTexture& t) {
             t.multiply([&](const openvdb::Coord& ijk) { return lic::roiWeight(roi->at(domain.worldOf(ijk)), range[0], range[1]); },

@@ -4,7 +4,7 @@
 #pragma once
 
 #include "Plan.h"
-#include "Scalars.h"
+#include "lic/field/ScalarField.h"
 
 #include "lic/texture/Noise.h"
 #include "lic/field/OutputDomain.h"
@@ -36,7 +36,7 @@ struct SpotShare
 /// @throw lic::InputError for a surface scalar without ridges above its threshold.
 /// `raw`: the noise bake's per-voxel white noise when it is not the seed's (an unsteady
 /// sequence's carried noise, lic/texture/Advection.h).
-Input makeInput(const Plan& plan, const lic::OutputDomain& domain, ScalarSet& scalars, const SpotShare* share = nullptr,
+Input makeInput(const Plan& plan, const lic::OutputDomain& domain, lic::ScalarSet& scalars, const SpotShare* share = nullptr,
                 lic::NoiseTexture::RawNoise raw = {});
 
 } // namespace vdbexport::pipeline

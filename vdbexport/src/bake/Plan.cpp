@@ -1,9 +1,12 @@
 #include "Plan.h"
 
-#include "vdbexport/bake/Bake.h"
+#include "vdbexport/bake/Outputs.h"
 
 #include "lic/util/Error.h"
-#include "lic/texture/Spots.h"
+#include "lic/engine/Engine.h"
+#include "lic/engine/Kernels.h"
+
+#include <algorithm>
 
 #include <filesystem>
 
@@ -18,9 +21,10 @@ namespace {
 void checkSupported(const Recipe& r)
 {
     const bool spots = r.input.type == "spots";
-    if (!spots && r.lic.engine == "splat") {
-        throw lic::InputError("lic.engine \"splat\" (--engine splat) deposits spot footprints: it needs spot input "
-                              "(input.type \"spots\"); use fast or naive for noise");
+    try {
+        (void)lic::chooseEngine(r.lic.engine, spots);
+    } catch (const lic::InputError& e) {
+        throw lic::InputError(std::string("lic.engine (--engine): ") + e.what());
     }
     if (!spots && r.width) {
         throw lic::InputError("width needs spot input (input.type \"spots\", --input spots): line width "
@@ -84,9 +88,10 @@ Plan makePlan(const Recipe& recipe)
     checkOutputDirectory(recipe.output.path);
     checkNotOverwritten(recipe, recipe.field.path, "the input field");
 
-    Plan p{recipe, {}, 1, false, false, false, true, 1, 1, 1, {}, {}};
+    Plan p{recipe, {}, 1, false, false, false, true, 1, 1, 1, {}, {}, 0.0};
+    p.spots = recipe.input.type == "spots";
     lic::LicSettings& s = p.settings;
-    s.engine = lic::engineFromString(recipe.lic.engine);
+    s.engine = lic::chooseEngine(recipe.lic.engine, p.spots);
     s.integrator = lic::integratorFromString(recipe.lic.integrator);
     s.kernel = lic::kernelFromString(recipe.lic.kernel);
     s.decay = recipe.lic.decay;
@@ -100,7 +105,6 @@ Plan makePlan(const Recipe& recipe)
     s.ripple = p.frames > 1;
     s.validate();
 
-    p.spots = recipe.input.type == "spots";
     p.roiPre = recipe.roi && recipe.roi->mode == "pre";
     p.roiPost = recipe.roi && recipe.roi->mode == "post";
     p.stretch = recipe.output.contrast == "stretch";
@@ -116,6 +120,8 @@ Plan makePlan(const Recipe& recipe)
             p.haloPeak[std::size_t(k)] = lic::spotPeak(s, r * recipe.input.haloScale);
         }
     }
+    if (p.spots)
+        for (double r : recipe.input.radii) p.maxSpotRadius = std::max(p.maxSpotRadius, r * recipe.input.haloScale);
     return p;
 }
 

@@ -4,7 +4,7 @@
 
 #include "vdbexport/bake/Recipe.h"
 
-#include "lic/engine/Engine.h"
+#include "lic/engine/Settings.h"
 
 #include <vector>
 
@@ -24,6 +24,8 @@ struct Plan
     /// Spots: the peak a single spot gives on a straight line, per level (lines and halos), the
     /// normalisation that maps a line's core to 1 (1 without stretch).
     std::vector<double> linePeak, haloPeak;
+    /// Spots: the largest halo radius (output voxels), how far a spot's texture reaches.
+    double maxSpotRadius = 0.0;
 };
 
 /// Validate the recipe (values, paths, combinations, features not available yet) and plan the

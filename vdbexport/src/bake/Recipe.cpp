@@ -3,7 +3,12 @@
 // so the three cannot drift apart.
 #include "vdbexport/bake/Recipe.h"
 
-#include <lic/util/Error.h>
+#include "lic/engine/Engine.h"
+#include "lic/engine/Settings.h"
+#include "lic/engine/Streamline.h"
+#include "lic/texture/Noise.h"
+#include "lic/texture/Spots.h"
+#include "lic/util/Error.h"
 
 #include <algorithm>
 #include <cctype>
@@ -648,13 +653,19 @@ Recipe loadRecipeFile(const std::string& path)
 
 const std::vector<std::string>& allowedValues(const std::string& keyPath)
 {
+    // The library's own name tables where it has one (engines, kernels, integrators, spot
+    // distributions, noise filters), so a new value needs no change here.
     static const std::map<std::string, std::vector<std::string>> table{
-        {"lic.engine", {"auto", "naive", "fast", "splat"}},
-        {"lic.kernel", {"box", "exp"}},
-        {"lic.integrator", {"rk4", "rk45"}},
+        {"lic.engine", [] {
+             std::vector<std::string> names{"auto"};
+             for (const lic::EngineInfo& e : lic::engines()) names.emplace_back(e.name);
+             return names;
+         }()},
+        {"lic.kernel", lic::listedNames(lic::kernelNames())},
+        {"lic.integrator", lic::listedNames(lic::integratorNames())},
         {"input.type", {"noise", "spots"}},
-        {"input.distribution", {"regular", "random", "jittered", "poisson"}},
-        {"input.noise_filter", {"binomial", "none"}},
+        {"input.distribution", lic::listedNames(lic::spotDistributionNames())},
+        {"input.noise_filter", lic::listedNames(lic::noiseFilterNames())},
         {"roi.mode", {"pre", "post"}},
         {"output.contrast", {"stretch", "none"}},
         {"field.format", {"auto", "vdb", "npy", "vti", "vtk", "raw"}},

@@ -1,6 +1,6 @@
 #include "Write.h"
 
-#include "vdbexport/bake/Bake.h"
+#include "vdbexport/io/OutputNames.h"
 #include "vdbexport/io/VdbIO.h"
 
 #include "lic/composite/Colormap.h"
@@ -94,7 +94,7 @@ nlohmann::json gridsJson(const openvdb::GridPtrVec& grids)
     return out;
 }
 
-Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::MetaMap& densityMeta,
+Written writeFrames(const Plan& plan, lic::Compositor& compositor, const openvdb::MetaMap& densityMeta,
                     lic::Progress& progress, const FrameHook& gather)
 {
     const Recipe& r = plan.recipe;

@@ -4,8 +4,10 @@
 // and two bakes to one output never leave the manifest of one beside the frames of the other.
 #pragma once
 
-#include "Composite.h"
-#include "Plan.h"
+#include "bake/Frame.h"
+#include "bake/Plan.h"
+
+#include "lic/composite/Compositor.h"
 
 #include "lic/util/Progress.h"
 #include "vdbexport/io/VdbIO.h"
@@ -52,7 +54,7 @@ void stageFrame(const Recipe& recipe, openvdb::GridPtrVec& grids, const openvdb:
 nlohmann::json gridsJson(const openvdb::GridPtrVec& grids);
 
 /// Write every frame: `densityMeta` goes on each frame's `density` grid, with `lic_frame`.
-Written writeFrames(const Plan& plan, Compositor& compositor, const openvdb::MetaMap& densityMeta,
+Written writeFrames(const Plan& plan, lic::Compositor& compositor, const openvdb::MetaMap& densityMeta,
                     lic::Progress& progress, const FrameHook& gather = {});
 
 /// Write the sidecar manifest of a bake (`paths`: its frame files, staged in `output`, with their

@@ -138,12 +138,4 @@ FieldFrames resolveFieldFrames(const FieldSpec& field)
     return out;
 }
 
-std::string sequenceFramePath(const std::string& vdbPath, int frame)
-{
-    fs::path p(vdbPath);
-    const std::string ext = p.extension() == ".vdb" ? ".vdb" : "";
-    const fs::path stem = ext.empty() ? p.filename() : p.stem();
-    return (p.parent_path() / (stem.string() + "_" + padded(frame, 4) + ".vdb")).string();
-}
-
 } // namespace vdbexport

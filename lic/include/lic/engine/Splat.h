@@ -22,7 +22,9 @@
 // in spot order, into its own voxels only.
 #pragma once
 
+#include "lic/engine/Driver.h"
 #include "lic/engine/Engine.h"
+#include "lic/engine/Settings.h"
 #include "lic/texture/Spots.h"
 
 #include <vector>
@@ -63,13 +65,18 @@ private:
     std::vector<float> mTable; // [tau][d][part]
 };
 
-/// convolveBricks() for spots with the splat engine: the same channels a gather engine delivers
-/// (2K, or 3·2K + 2 for a loop), brick by brick, only for bricks some spot's footprint reaches
-/// (others have nothing to show). Blocks no footprint touches are flagged in
+/// The splat engine's entry in the engine table: the same channels a gather engine delivers for
+/// spots (2K, or 3·2K + 2 for a loop), brick by brick, only for bricks some spot's footprint
+/// reaches (others have nothing to show). Blocks no footprint touches are flagged in
 /// BrickChannels::blockTouched and their values are not set.
 /// @throw lic::InputError for invalid settings or radii; lic::Cancelled.
-LicStats splatSpotBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
-                         const SpotSet& spots, const std::vector<double>& radii, double haloScale,
-                         const LicSettings& settings, Progress& progress, const BrickSink& sink);
+LicStats splatSpotBricks(const ConvolveJob& job, const SpotInput& spots, const BrickSink& sink);
+
+/// The splat engine's policy (its row of the engine table): 64³ bricks whatever the kernel; the
+/// reach of a spot (its line's support and the footprint the rasteriser covers around it); the
+/// field its lines sample.
+int splatBrickDim(const LicSettings& settings);
+double splatSpotReach(const LicSettings& settings, double maxSpotRadius);
+double splatFieldReach(const LicSettings& settings, bool spots, double maxSpotRadius, int stride);
 
 } // namespace lic

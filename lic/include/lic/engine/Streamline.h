@@ -3,9 +3,11 @@
 #pragma once
 
 #include "lic/field/Field.h"
+#include "lic/util/Names.h"
 
 #include <openvdb/math/Vec3.h>
 
+#include <span>
 #include <string>
 #include <vector>
 
@@ -21,6 +23,8 @@ enum class StopReason {
     Caller        ///< the per-sample callback asked to stop
 };
 
+/// The integrators' names (a recipe's allowed values).
+std::span<const EnumName<Integrator>> integratorNames();
 const char* toString(Integrator);
 const char* toString(StopReason);
 /// @throw lic::InputError for anything but "rk4" or "rk45".

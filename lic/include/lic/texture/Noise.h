@@ -2,13 +2,15 @@
 // (seed, voxel), so any part of the volume can be regenerated independently of the rest.
 #pragma once
 
-#include "lic/engine/Bricks.h"
+#include "lic/field/Bricks.h"
+#include "lic/util/Names.h"
 
 #include <openvdb/openvdb.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <functional>
+#include <span>
 
 #include <algorithm>
 #include <cmath>
@@ -46,6 +48,8 @@ enum class NoiseFilter {
 };
 /// @throw lic::InputError for names other than "binomial" and "none".
 NoiseFilter noiseFilterFromString(const std::string&);
+/// The filters' names (a recipe's allowed values).
+std::span<const EnumName<NoiseFilter>> noiseFilterNames();
 
 /// The dense noise input texture. Each output voxel has a white-noise value in [0, 1) from a hash
 /// of (seed, voxel); with NoiseFilter::Binomial the texture value of a voxel is the [¼ ½ ¼]³
@@ -222,16 +226,5 @@ public:
 private:
     float mValue;
 };
-
-struct LicSettings;
-struct LicStats;
-struct BrickChannels;
-class Progress;
-
-/// convolveBricks() of per-brick noise: what a bake runs (compiled once, in Noise.cpp).
-/// @throw lic::InputError for invalid settings; lic::Cancelled.
-LicStats convolveNoiseBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
-                             NoiseBrickSource& noise, const LicSettings& settings, Progress& progress,
-                             const std::function<void(const BrickChannels&)>& sink);
 
 } // namespace lic

@@ -6,13 +6,15 @@
 // function of (seed, parameters, box): no shared RNG stream, no dependence on thread count.
 #pragma once
 
-#include "lic/engine/Engine.h"
+#include "lic/util/Error.h"
+#include "lic/util/Names.h"
 
 #include <openvdb/openvdb.h>
 
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -24,6 +26,8 @@ enum class SpotDistribution {
     Jittered, ///< lattice point + per-axis offset uniform in ±jitter·d/2 (jitter 1 = anywhere in its cell)
     Poisson   ///< approximate Poisson-disk (Bridson's dart throwing), minimum distance kPoissonRadius·d
 };
+/// The distributions' names (a recipe's allowed values).
+std::span<const EnumName<SpotDistribution>> spotDistributionNames();
 const char* toString(SpotDistribution);
 /// @throw lic::InputError for names other than regular, random, jittered, poisson.
 SpotDistribution spotDistributionFromString(const std::string&);
@@ -204,25 +208,5 @@ private:
     std::array<int, 3> mLo{}, mDim{};
     std::vector<std::uint32_t> mStart, mOrder;
 };
-
-/// Largest value the convolution of one spot of radius `radius` can give on a straight
-/// streamline through its centre with these kernel settings (all sub-sample phases tried): the
-/// normalisation that maps a line's core to 1.
-double spotPeak(const LicSettings& settings, double radius);
-
-/// Convolve the K-level spot texture (K = radii.size(), 1 ≤ K ≤ 4) along the field's
-/// streamlines: 2K channels (lines, then halos), or the ripple channels of them when
-/// settings.ripple. Instantiated here so callers do not compile the engines for every K.
-/// @throw lic::InputError for K outside [1, 4].
-LicResult convolveSpots(const VelocityField& field, const OutputDomain& domain, const SpotSet& spots,
-                        const std::vector<double>& radii, double haloScale, const LicSettings& settings,
-                        Progress& progress = nullProgress());
-
-/// convolveBricks() of the K-level spot texture (K = radii.size(), 1 ≤ K ≤ 4): what a bake
-/// runs; the engines are compiled here once for every K.
-/// @throw lic::InputError for K outside [1, 4] or invalid settings; lic::Cancelled.
-LicStats convolveSpotBricks(const VelocityField& field, const OutputDomain& domain, const BrickLayout& layout,
-                            const SpotSet& spots, const std::vector<double>& radii, double haloScale,
-                            const LicSettings& settings, Progress& progress, const BrickSink& sink);
 
 } // namespace lic

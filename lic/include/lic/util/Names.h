@@ -7,6 +7,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace lic {
 
@@ -20,25 +21,30 @@ struct EnumName
     std::string_view note = {};
 };
 
+/// The listed names of a table (aliases left out), in order: e.g. a recipe key's allowed values.
+template<typename E>
+std::vector<std::string> listedNames(std::span<const EnumName<E>> table)
+{
+    std::vector<std::string> out;
+    for (std::size_t i = 0; i < table.size(); ++i) {
+        bool alias = false;
+        for (std::size_t j = 0; j < i; ++j) alias = alias || table[j].value == table[i].value;
+        if (!alias) out.emplace_back(table[i].name);
+    }
+    return out;
+}
+
 /// "a, b or c" of the table's listed names (aliases left out), each followed by " (note)" if any.
 template<typename E>
 std::string listNames(std::span<const EnumName<E>> table)
 {
+    const std::vector<std::string> names = listedNames(table);
     std::string out;
-    std::size_t listed = 0, total = 0;
-    for (std::size_t i = 0; i < table.size(); ++i) {
-        bool alias = false;
-        for (std::size_t j = 0; j < i; ++j) alias = alias || table[j].value == table[i].value;
-        if (!alias) ++total;
-    }
-    for (std::size_t i = 0; i < table.size(); ++i) {
-        bool alias = false;
-        for (std::size_t j = 0; j < i; ++j) alias = alias || table[j].value == table[i].value;
-        if (alias) continue;
-        if (listed > 0) out += listed + 1 == total ? " or " : ", ";
-        out += table[i].name;
-        if (!table[i].note.empty()) out += " (" + std::string(table[i].note) + ")";
-        ++listed;
+    for (std::size_t i = 0; i < names.size(); ++i) {
+        if (i > 0) out += i + 1 == names.size() ? " or " : ", ";
+        out += names[i];
+        for (const auto& row : table)
+            if (row.name == names[i] && !row.note.empty()) out += " (" + std::string(row.note) + ")";
     }
     return out;
 }

@@ -1,27 +1,40 @@
-// Small threading helpers shared by the engines.
+// Threading helpers: the one bound on threads, and cancellation.
 #pragma once
 
 #include "lic/util/Error.h"
 #include "lic/util/Progress.h"
 
-#include <tbb/task_arena.h>
+#include <tbb/global_control.h>
 
-#include <utility>
+#include <optional>
 
-namespace lic::detail {
+namespace lic {
 
-/// Run `fn` in a TBB arena of `threads` workers (0 = all cores).
-template<typename Fn>
-void runWithThreads(int threads, Fn&& fn)
+/// While it lives, every TBB parallel loop of this process runs on at most `threads` threads
+/// (0 = no bound: all cores). The one way licvdb bounds its threads: a bake or render sets it once
+/// at the top (`--threads N`, recipe `threads`), so every stage (scalars, field preparation, the
+/// output domain, table builds, advection, convolution, compositing) honours it; the library's
+/// entry points that take a thread count set it too. Bounds nest: TBB applies the smallest.
+class ThreadLimit
 {
-    tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
-    arena.execute(std::forward<Fn>(fn));
-}
+public:
+    explicit ThreadLimit(int threads)
+    {
+        if (threads > 0) mControl.emplace(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+    }
+    ThreadLimit(const ThreadLimit&) = delete;
+    ThreadLimit& operator=(const ThreadLimit&) = delete;
 
+private:
+    std::optional<tbb::global_control> mControl;
+};
+
+namespace detail {
 /// Throw lic::Cancelled if the progress hook asks to stop.
 inline void checkCancel(Progress& progress)
 {
     if (progress.wasInterrupted()) throw Cancelled();
 }
+} // namespace detail
 
-} // namespace lic::detail
+} // namespace lic

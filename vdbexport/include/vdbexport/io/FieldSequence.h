@@ -33,8 +33,4 @@ FieldFrames resolveFieldFrames(const FieldSpec& field);
 /// True if the recipe bakes an unsteady sequence (field.frames, or a pattern path).
 bool isSequenceBake(const Recipe& recipe);
 
-/// Output file of sequence frame `frame`: OUT.vdb → OUT_0012.vdb (the field's own frame number,
-/// at least 4 digits).
-std::string sequenceFramePath(const std::string& vdbPath, int frame);
-
 } // namespace vdbexport

@@ -15,8 +15,6 @@
 
 namespace lic {
 
-struct LicSettings;
-
 /// One brick: an axis-aligned cube of `dim`³ output voxels (dim a multiple of 8, aligned to
 /// multiples of dim in index space) and the domain's active blocks inside it.
 struct Brick
@@ -42,6 +40,8 @@ public:
     const std::vector<Brick>& bricks() const { return mBricks; }
     /// Largest number of blocks in one brick (sizes per-thread buffers).
     std::size_t maxBlocks() const { return mMaxBlocks; }
+    /// 0 … size() − 1: the positions of every brick in this layout (not their ids).
+    std::vector<std::size_t> positions() const;
     /// The bricks with these ids only (a process's share of a distributed bake), in the order
     /// given; each keeps its id, so results keyed by id do not depend on the share.
     /// @throw lic::InputError for an id that is not in the layout.
@@ -52,17 +52,6 @@ private:
     std::vector<Brick> mBricks;
     std::size_t mMaxBlocks = 0;
 };
-
-/// The brick edge a bake uses when the recipe does not set one (output voxels): a function of the
-/// kernel only, never of the thread count, so the output never depends on the machine. Long
-/// kernels get larger bricks, so the ghost margin (traced only to complete the windows of lines
-/// that leave the brick) stays a small part of each line.
-int defaultBrickDim(const LicSettings& settings);
-
-/// Ghost margin of a brick (output voxels per side): how far outside its box a streamline traced
-/// for the brick can sample the input texture (the kernel length, the half voxel of nearest-voxel
-/// rounding and the trilinear/binomial footprint).
-int ghostMargin(const LicSettings& settings);
 
 /// Dense local numbering of a brick's voxels: block-major (8³ blocks x-major inside the brick),
 /// and inside a block the leaf offset. Arrays of `voxels()` entries map block by block onto leaves.

@@ -1,6 +1,5 @@
-#include "lic/engine/Bricks.h"
+#include "lic/field/Bricks.h"
 
-#include "lic/engine/Engine.h"
 #include "lic/util/Error.h"
 
 #include <algorithm>
@@ -39,6 +38,13 @@ BrickLayout::BrickLayout(const OutputDomain& domain, int dim)
     for (const Brick& b : mBricks) mMaxBlocks = std::max(mMaxBlocks, b.blocks.size());
 }
 
+std::vector<std::size_t> BrickLayout::positions() const
+{
+    std::vector<std::size_t> out(mBricks.size());
+    for (std::size_t i = 0; i < out.size(); ++i) out[i] = i;
+    return out;
+}
+
 BrickLayout BrickLayout::subset(const std::vector<std::size_t>& ids) const
 {
     BrickLayout out(*this);
@@ -53,26 +59,6 @@ BrickLayout BrickLayout::subset(const std::vector<std::size_t>& ids) const
         out.mMaxBlocks = std::max(out.mMaxBlocks, mBricks[id].blocks.size());
     }
     return out;
-}
-
-int defaultBrickDim(const LicSettings& settings)
-{
-    // Measured on the 128³ abc bake (docs/performance.md): 64 for kernels up to ~24 voxels;
-    // longer kernels need larger bricks to keep the window tails (n samples past each end of a
-    // line) a small part of each line. Powers of two, so power-of-two volumes split evenly.
-    // The splat engine has no window tails at brick faces (a footprint crossing a face is
-    // rasterised by each brick it reaches, from one trace), so it keeps 64³ for load balance.
-    if (settings.engine == EngineType::Splat) return 64;
-    return settings.length <= 24 ? 64 : 128;
-}
-
-int ghostMargin(const LicSettings& settings)
-{
-    // A line leaves the brick at most half a voxel past its box (nearest-voxel rounding), then
-    // traces n more samples of arc h: ≤ n·h index units on any axis. Two more voxels cover the
-    // trilinear lookup and the binomial filter's footprint.
-    const double tail = double(settings.halfSamples()) * settings.step;
-    return int(std::ceil(tail + 0.5)) + 2;
 }
 
 BrickIndex::BrickIndex(const OutputDomain& domain, const Brick& brick, int dim)

@@ -1,4 +1,4 @@
-#include "Scalars.h"
+#include "lic/field/ScalarField.h"
 
 #include "lic/util/Error.h"
 #include "lic/util/Parallel.h"
@@ -15,7 +15,7 @@
 #include <optional>
 #include <vector>
 
-namespace vdbexport::pipeline {
+namespace lic {
 
 namespace {
 const char* const kWholeBoxMin = "licvdb_whole_active_bbox_min";
@@ -76,12 +76,12 @@ openvdb::FloatGrid::ConstPtr ScalarSet::resolve(const std::string& name)
         g = mag;
     } else if (name.size() > kGradient.size() && name.ends_with(kGradient)) {
         const auto base = resolve(name.substr(0, name.size() - kGradient.size()));
-        auto grad = lic::gradientMagnitude(*base, name);
+        auto grad = gradientMagnitude(*base, name);
         // Same active topology as its base: a part's boxes are the base's.
         if (isPart(*base)) setPartOf(*grad, activeBoxOf(*base), partBoxOf(*base));
         g = grad;
     } else {
-        g = lic::resolveScalar(mVelocity, mFile, name);
+        g = resolveScalar(mVelocity, mFile, name);
         if (part && !isPart(*g)) {
             // Derived from a part of the velocity (file scalars carry their own boxes): the
             // velocity's topology, so its boxes.
@@ -97,7 +97,7 @@ ScalarField::ScalarField(openvdb::FloatGrid::ConstPtr grid)
 {
     const bool part = isPart(*mGrid);
     const openvdb::CoordBBox bb = part ? activeBoxOf(*mGrid) : mGrid->evalActiveVoxelBoundingBox();
-    if (bb.empty()) throw lic::InputError("scalar grid \"" + mGrid->getName() + "\" has no active voxels");
+    if (bb.empty()) throw InputError("scalar grid \"" + mGrid->getName() + "\" has no active voxels");
     openvdb::CoordBBox held = bb; // the dense copy: the active box, or the part of it held here
     if (part) {
         held.intersect(partBoxOf(*mGrid));
@@ -105,10 +105,10 @@ ScalarField::ScalarField(openvdb::FloatGrid::ConstPtr grid)
     }
     const openvdb::Coord dim = held.dim();
     if (double(dim[0]) * dim[1] * dim[2] > double(1u << 28)) {
-        throw lic::InputError("scalar grid \"" + mGrid->getName() + "\" has an active bounding box of more than 2^28 "
+        throw InputError("scalar grid \"" + mGrid->getName() + "\" has an active bounding box of more than 2^28 "
                               "voxels; crop or resample the field");
     }
-    mWorldToIndex = lic::AffineMap(mGrid->transform()).worldToIndex;
+    mWorldToIndex = AffineMap(mGrid->transform()).worldToIndex;
     for (int a = 0; a < 3; ++a) {
         mLo[a] = bb.min()[a];
         mHi[a] = bb.max()[a];
@@ -138,12 +138,13 @@ using Histogram = std::vector<std::uint64_t>;
 /// A histogram of `bins` bins over the finite samples at every active output voxel: `add(key, h)`
 /// counts a sample's order key into h.
 template<typename Add>
-Histogram histogram(const ScalarField& scalar, const lic::OutputDomain& domain, int threads, std::size_t bins,
+Histogram histogram(const ScalarField& scalar, const OutputDomain& domain, int threads, std::size_t bins,
                     const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce, Add add)
 {
     tbb::combinable<Histogram> parts([bins] { return Histogram(bins, 0); });
     const std::size_t count = blocks ? blocks->size() : domain.blockCount();
-    lic::detail::runWithThreads(threads, [&] {
+    {
+        const ThreadLimit threadLimit(threads);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count), [&](const auto& r) {
             Histogram& h = parts.local();
             for (std::size_t i = r.begin(); i != r.end(); ++i) {
@@ -151,12 +152,12 @@ Histogram histogram(const ScalarField& scalar, const lic::OutputDomain& domain, 
                 const auto& mask = domain.blockMask(b);
                 for (auto on = mask.beginOn(); on; ++on) {
                     const std::size_t off = on.pos();
-                    const float v = scalar.at(domain.worldOf(domain.coordOf(b * lic::OutputDomain::kBlockVoxels + off)));
+                    const float v = scalar.at(domain.worldOf(domain.coordOf(b * OutputDomain::kBlockVoxels + off)));
                     if (std::isfinite(v)) add(orderKey(v), h);
                 }
             }
         });
-    });
+    }
     Histogram all(bins, 0);
     parts.combine_each([&](const Histogram& h) {
         for (std::size_t i = 0; i < all.size(); ++i) all[i] += h[i]; // integer sums: any order
@@ -178,12 +179,12 @@ std::pair<int, std::uint64_t> binOfRank(const Histogram& h, std::uint64_t k)
 
 } // namespace
 
-std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDomain& domain, int threads)
+std::array<double, 2> autoRange(const ScalarField& scalar, const OutputDomain& domain, int threads)
 {
     return autoRange(scalar, domain, threads, nullptr, {});
 }
 
-std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDomain& domain, int threads,
+std::array<double, 2> autoRange(const ScalarField& scalar, const OutputDomain& domain, int threads,
                                 const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce)
 {
     constexpr std::size_t kBins = 65536;
@@ -214,4 +215,4 @@ std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDoma
     return out;
 }
 
-} // namespace vdbexport::pipeline
+} // namespace lic

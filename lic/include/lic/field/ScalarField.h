@@ -1,5 +1,6 @@
-// Stage 3 of a bake: scalars. Derived scalars and the field file's float grids by name, sampled at
-// output voxel centres, and their automatic ranges, all without arrays over the output volume.
+// Scalars as a bake uses them: derived scalars and the field file's float grids by name
+// (ScalarSet), sampled at world positions (ScalarField), and their automatic ranges over the
+// output voxels (autoRange), all without arrays over the output volume.
 #pragma once
 
 #include "lic/field/Field.h"
@@ -17,7 +18,7 @@
 #include <string>
 #include <vector>
 
-namespace vdbexport::pipeline {
+namespace lic {
 
 /// Scalars of a bake by name: derived (speed, vorticity, …), a float grid of the field file,
 /// NAME-gradient = |∇NAME|, or NAME-abs = |NAME| (e.g. streamwise-vorticity-abs: the magnitude of
@@ -72,7 +73,7 @@ public:
 
     float at(const openvdb::Vec3d& world) const
     {
-        const openvdb::Vec3d idx = lic::AffineMap::apply(mWorldToIndex, world);
+        const openvdb::Vec3d idx = AffineMap::apply(mWorldToIndex, world);
         double f[3];
         std::size_t o0[3], o1[3];
         for (int a = 0; a < 3; ++a) {
@@ -106,14 +107,14 @@ private:
 /// centres (non-finite values skipped; a constant scalar gives [v, v + 1]). Exact order
 /// statistics from two passes of a 65 536-bin histogram over the values' order-preserving bits,
 /// so memory does not grow with the volume; deterministic for any thread count.
-std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDomain& domain, int threads);
+std::array<double, 2> autoRange(const ScalarField& scalar, const OutputDomain& domain, int threads);
 
-/// Sums histograms over the processes of a distributed bake, in place (Job::sumAll).
+/// Sums histograms over the processes of a distributed bake, in place (an MPI all-reduce).
 using HistogramReduce = std::function<void(std::vector<std::uint64_t>&)>;
 /// autoRange() over the voxels of `blocks` only (a process's bricks; null = every block), with
 /// each histogram summed by `reduce` over the processes before the percentiles are read from
 /// it: integer counts, so the range is exactly that of one process over every block.
-std::array<double, 2> autoRange(const ScalarField& scalar, const lic::OutputDomain& domain, int threads,
+std::array<double, 2> autoRange(const ScalarField& scalar, const OutputDomain& domain, int threads,
                                 const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce);
 
-} // namespace vdbexport::pipeline
+} // namespace lic

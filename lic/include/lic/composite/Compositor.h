@@ -1,0 +1,142 @@
+// Compositing: a convolution's raw channels become the output grids. Each finished brick's
+// channels become VDB leaf nodes right away (lines and halos normalised, width blended,
+// region-of-interest post-mask, colour, tangent, input; voxels whose line and halo are both ~0 left
+// inactive), and the brick's buffers go back to its worker. What needs the whole volume is gathered
+// cheaply: the noise contrast from per-brick moments merged in brick order, and a loop's frames
+// composed leaf by leaf from the ripple sums kept per voxel. Memory: the output grids themselves,
+// never a dense array over the volume.
+#pragma once
+
+#include "lic/composite/Colormap.h"
+#include "lic/composite/Contrast.h"
+#include "lic/composite/LeafSet.h"
+#include "lic/engine/Driver.h"
+#include "lic/field/Bricks.h"
+#include "lic/field/Field.h"
+#include "lic/field/OutputDomain.h"
+#include "lic/field/ScalarField.h"
+#include "lic/texture/Noise.h"
+#include "lic/texture/Spots.h"
+
+#include <openvdb/openvdb.h>
+
+#include <array>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace lic {
+
+/// Voxels of a spot bake whose line and halo are both at most this stay inactive (1% of a line
+/// core: invisible in any renderer, and well below the raycaster's halo threshold of 0.05).
+constexpr float kSparseEpsilon = 0.01f;
+
+/// What to composite. Ranges are in the scalars' own units.
+struct CompositeSettings
+{
+    int frames = 1;        ///< cyclic loop frames (1 = a still): the raw channels are ripple sums when > 1
+    bool spots = false;    ///< spot input (lines and halos per width level), else noise
+    int levels = 1;        ///< spot width levels K: texture channels 2K (lines, then halos)
+    /// Spots: per level, the peak a single spot gives on a straight line (lines and halos): what
+    /// maps a line's core to 1 (engine/Kernels.h spotPeak(); 1 without normalisation).
+    std::vector<double> linePeak{1.0}, haloPeak{1.0};
+    bool stretch = true;   ///< noise: contrast stretch (ContrastStretch)
+    bool widthInvert = false;              ///< width scalar: high = thin lines
+    std::array<double, 2> widthRange{0, 1}; ///< width scalar mapped onto narrowest … widest
+    std::array<double, 2> roiRange{0, 1};   ///< ROI post-mask: kept range
+    std::array<double, 2> colorRange{0, 1}; ///< colour scalar mapped onto the colormap
+    bool writeInput = false;   ///< grid `input`: the input texture
+    bool writeTangent = false; ///< grid `tangent`: the unit flow direction
+    bool writeSeries = false;  ///< spots: grids density_w<k> / halo_w<k> for every level
+    double inputRadius = 1.0;  ///< spots' `input` grid: the narrowest line radius (output voxels)
+    double haloScale = 2.0;
+    int threads = 0;           ///< compositing a loop's frames (0 = all cores)
+
+    /// Texture channels C: 1 for noise, 2K for spots.
+    int textureChannels() const { return spots ? 2 * levels : 1; }
+    /// Channels a brick delivers: C, or 3C + 2 for a loop (ripple sums).
+    int rawChannels() const { return frames > 1 ? 3 * textureChannels() + 2 : textureChannels(); }
+};
+
+/// The scalars and textures compositing reads; empty ScalarFields are unused.
+struct CompositeInputs
+{
+    ScalarField width;   ///< spots: picks the width level per voxel (with 2+ levels)
+    ScalarField roi;     ///< region of interest, post-mask
+    ScalarField color;   ///< colour scalar (needs `colormap`)
+    const Colormap* colormap = nullptr;
+    NoiseBrickSource* noise = nullptr; ///< noise bakes with writeInput: the bricks' noise
+    const SpotSet* spots = nullptr;    ///< spot bakes with writeInput: the spots
+};
+
+class Compositor
+{
+public:
+    /// @throw lic::InputError for inputs the settings need but lack.
+    Compositor(const CompositeSettings& settings, CompositeInputs inputs, const VelocityField& field,
+               const OutputDomain& domain, const BrickLayout& layout);
+
+    /// Turn a finished brick into leaves. Thread-safe (called from the brick's worker).
+    void consume(const BrickChannels& bricks);
+    /// After the last brick: merge the per-brick statistics in brick order (deterministic).
+    void finish();
+    /// A distributed bake's per-brick statistics, before finish(): pack those of bricks `ids`
+    /// (this process's), and install those another process packed (exact bits, so every process
+    /// merges the same numbers in the same brick order).
+    std::string packMoments(const std::vector<std::size_t>& ids) const;
+    /// @throw lic::Error for a malformed message or a brick id out of range.
+    void unpackMoments(const std::string& bytes);
+    /// Statistics of the raw frame-1 density over the active voxels (noise bakes).
+    const ChannelStats& rawStats() const { return mRaw; }
+
+    /// The grids of frame f (1-based) in file order: density (+ halo and, with writeSeries, each
+    /// level's lines and halos), then input, tangent, color, scalar. The static grids are built on
+    /// the first call and shared by every frame. The last frame takes the per-voxel data over in
+    /// place, so call frames in order 1 … N.
+    openvdb::GridPtrVec frame(int f);
+
+private:
+    struct SpotVoxel
+    {
+        float density = 0, halo = 0;
+        float lines[4] = {}, halos[4] = {};
+    };
+    /// Lines and halos of each level normalised by their peaks (halo ≥ line), blended by width,
+    /// times the ROI post-mask. `raw(c)` gives texture channel c's convolved value.
+    template<typename Raw>
+    SpotVoxel composeSpots(const Raw& raw, float widthT, float roi) const;
+    void consumeBlock(const BrickChannels& bc, std::size_t i, Moments& moments);
+    /// Whether a spot voxel is kept (line or halo shows in some frame); a still's final values are
+    /// stored here.
+    template<typename Raw>
+    bool keepSpotVoxel(const Raw& raw, float widthT, float roi, std::size_t b, const openvdb::Coord& origin,
+                       openvdb::Index off);
+    /// The grids every frame shares (input, tangent, colour, scalar) at one voxel.
+    void addStatic(std::size_t b, const openvdb::Coord& origin, openvdb::Index off, const openvdb::Coord& ijk,
+                   const openvdb::Vec3d& world, const NoiseTexture* noise);
+    /// A loop frame's (or a noise still's) density and halo leaves, composed from the kept channels.
+    void composeLeaves(int f, LeafSet<openvdb::FloatGrid>& density, LeafSet<openvdb::FloatGrid>& halo,
+                       std::vector<LeafSet<openvdb::FloatGrid>>& lines, std::vector<LeafSet<openvdb::FloatGrid>>& halos);
+    void buildStatic();
+
+    CompositeSettings mSettings;
+    CompositeInputs mInputs;
+    const VelocityField& mField;
+    const OutputDomain& mDomain;
+    std::optional<SpotTexture<1>> mInputSpots; // writeInput of a spot bake
+
+    // Per-voxel data kept until the frames are written.
+    std::vector<LeafSet<openvdb::FloatGrid>> mRawLeaves;  // loops and noise: the brick's channels
+    LeafSet<openvdb::FloatGrid> mWidthLeaves, mRoiLeaves;  // loops: width blend t, ROI post-mask
+    LeafSet<openvdb::FloatGrid> mDensity, mHalo;           // spot stills: final
+    std::vector<LeafSet<openvdb::FloatGrid>> mLines, mHalos; // spot stills with writeSeries
+    LeafSet<openvdb::FloatGrid> mInputLeaves, mScalarLeaves;
+    LeafSet<openvdb::Vec3SGrid> mTangentLeaves, mColorLeaves;
+    openvdb::GridPtrVec mStatic;
+    bool mStaticBuilt = false;
+
+    std::vector<Moments> mMoments; // per brick
+    ChannelStats mRaw;
+};
+
+} // namespace lic

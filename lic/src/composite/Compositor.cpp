@@ -1,0 +1,348 @@
+#include "lic/composite/Compositor.h"
+
+#include "lic/composite/Animation.h"
+#include "lic/field/Region.h"
+#include "lic/util/Error.h"
+#include "lic/util/Parallel.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+namespace lic {
+
+namespace {
+using FloatLeaf = openvdb::FloatTree::LeafNodeType;
+
+/// A scalar's value at `world` mapped from `range` onto [0, 1], clamped.
+double unitOf(const ScalarField& s, const openvdb::Vec3d& world, const std::array<double, 2>& range)
+{
+    return std::clamp((double(s.at(world)) - range[0]) / (range[1] - range[0]), 0.0, 1.0);
+}
+} // namespace
+
+Compositor::Compositor(const CompositeSettings& settings, CompositeInputs inputs, const VelocityField& field,
+                       const OutputDomain& domain, const BrickLayout& layout)
+    : mSettings(settings)
+    , mInputs(std::move(inputs))
+    , mField(field)
+    , mDomain(domain)
+{
+    const CompositeSettings& s = mSettings;
+    if (mInputs.color && !mInputs.colormap) throw InputError("colour by a scalar needs a colormap");
+    if (s.writeInput && !(s.spots ? mInputs.spots != nullptr : mInputs.noise != nullptr))
+        throw InputError("writing the input grid needs the input texture");
+    const std::size_t blocks = domain.blockCount();
+    const bool keepRaw = !s.spots || s.frames > 1;
+    if (keepRaw) {
+        mRawLeaves.resize(std::size_t(s.rawChannels()));
+        for (auto& set : mRawLeaves) set.init(blocks);
+        if (s.spots && mInputs.width && s.levels > 1) mWidthLeaves.init(blocks);
+        if (mInputs.roi) mRoiLeaves.init(blocks);
+    } else {
+        mDensity.init(blocks);
+        mHalo.init(blocks);
+        if (s.writeSeries) {
+            mLines.resize(std::size_t(s.levels));
+            mHalos.resize(std::size_t(s.levels));
+            for (auto& set : mLines) set.init(blocks);
+            for (auto& set : mHalos) set.init(blocks);
+        }
+    }
+    if (s.writeInput) mInputLeaves.init(blocks);
+    if (s.writeTangent) mTangentLeaves.init(blocks);
+    if (mInputs.color) {
+        mColorLeaves.init(blocks);
+        mScalarLeaves.init(blocks);
+    }
+    if (s.spots && s.writeInput) mInputSpots.emplace(*mInputs.spots, std::array<double, 1>{s.inputRadius}, s.haloScale);
+    mMoments.assign(layout.size(), Moments{});
+}
+
+template<typename Raw>
+Compositor::SpotVoxel Compositor::composeSpots(const Raw& raw, float widthT, float roi) const
+{
+    const int K = mSettings.levels;
+    SpotVoxel v;
+    for (int k = 0; k < K; ++k) {
+        const float li = float(1.0 / mSettings.linePeak[std::size_t(k)]);
+        const float hi = float(1.0 / mSettings.haloPeak[std::size_t(k)]);
+        v.lines[k] = std::clamp(raw(k) * li, 0.0f, 1.0f);
+        v.halos[k] = std::max(std::clamp(raw(K + k) * hi, 0.0f, 1.0f), v.lines[k]); // halo ⊇ line
+    }
+    if (mInputs.width && K > 1) {
+        // Blend the two levels around t·(K − 1): continuous in t, so no seams.
+        const double u = double(widthT) * double(K - 1);
+        const int k0 = std::min(K - 2, int(u));
+        const float w = float(u - k0);
+        v.density = (1.0f - w) * v.lines[k0] + w * v.lines[k0 + 1];
+        v.halo = (1.0f - w) * v.halos[k0] + w * v.halos[k0 + 1];
+    } else {
+        v.density = v.lines[0];
+        v.halo = v.halos[0];
+    }
+    if (mInputs.roi) {
+        v.density *= roi;
+        v.halo *= roi;
+        for (int k = 0; k < K; ++k) {
+            v.lines[k] *= roi;
+            v.halos[k] *= roi;
+        }
+    }
+    return v;
+}
+
+void Compositor::consume(const BrickChannels& bc)
+{
+    Moments moments;
+    for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i)
+        if (!bc.blockTouched || bc.blockTouched[i]) consumeBlock(bc, i, moments);
+    mMoments[bc.index] = moments;
+}
+
+void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& moments)
+{
+    constexpr std::size_t V = OutputDomain::kBlockVoxels;
+    const CompositeSettings& s = mSettings;
+    const std::size_t b = bc.brick->blocks[i];
+    const openvdb::Coord origin = mDomain.blockOrigin(b);
+    const int R = s.rawChannels(), frames = s.frames;
+    const NoiseTexture* noise = (!s.spots && s.writeInput) ? &(*mInputs.noise)(*bc.brick) : nullptr;
+
+    for (auto on = mDomain.blockMask(b).beginOn(); on; ++on) {
+        const openvdb::Index off = on.pos();
+        const openvdb::Coord ijk = mDomain.coordOf(b * V + off);
+        const openvdb::Vec3d world = mDomain.worldOf(ijk);
+        auto raw = [&](int c) { return bc.block(i, c)[off]; };
+        float widthT = 0.0f;
+        if (mInputs.width) {
+            const double t = unitOf(mInputs.width, world, s.widthRange);
+            widthT = float(s.widthInvert ? 1.0 - t : t);
+        }
+        const float roi = mInputs.roi ? roiWeight(mInputs.roi.at(world), s.roiRange[0], s.roiRange[1]) : 1.0f;
+        if (s.spots) {
+            if (!keepSpotVoxel(raw, widthT, roi, b, origin, off)) continue;
+        } else {
+            moments.add(frames > 1 ? rippleFrameValue(raw(0), raw(1), raw(2), raw(3), raw(4), FramePhase(1, frames))
+                                   : raw(0));
+        }
+        if (!mRawLeaves.empty()) {
+            for (int c = 0; c < R; ++c) mRawLeaves[std::size_t(c)].leaf(b, origin).setValueOn(off, raw(c));
+            if (mWidthLeaves.enabled()) mWidthLeaves.leaf(b, origin).setValueOn(off, widthT);
+            if (mRoiLeaves.enabled()) mRoiLeaves.leaf(b, origin).setValueOn(off, roi);
+        }
+        addStatic(b, origin, off, ijk, world, noise);
+    }
+}
+
+template<typename Raw>
+bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::size_t b, const openvdb::Coord& origin,
+                               openvdb::Index off)
+{
+    const int C = mSettings.textureChannels(), frames = mSettings.frames;
+    if (frames == 1) {
+        const SpotVoxel sv = composeSpots(raw, widthT, roi);
+        if (!(sv.density > kSparseEpsilon || sv.halo > kSparseEpsilon)) return false;
+        mDensity.leaf(b, origin).setValueOn(off, sv.density);
+        mHalo.leaf(b, origin).setValueOn(off, sv.halo);
+        for (std::size_t k = 0; k < mLines.size(); ++k) {
+            mLines[k].leaf(b, origin).setValueOn(off, sv.lines[k]);
+            mHalos[k].leaf(b, origin).setValueOn(off, sv.halos[k]);
+        }
+        return true;
+    }
+    // Kept when any frame of the loop shows line or halo here, so every frame file has the same
+    // topology.
+    for (int f = 1; f <= frames; ++f) {
+        const FramePhase ph(f, frames);
+        const SpotVoxel sv = composeSpots(
+            [&](int c) { return rippleFrameValue(raw(c), raw(C + c), raw(2 * C + c), raw(3 * C), raw(3 * C + 1), ph); },
+            widthT, roi);
+        if (sv.density > kSparseEpsilon || sv.halo > kSparseEpsilon) return true;
+    }
+    return false;
+}
+
+void Compositor::addStatic(std::size_t b, const openvdb::Coord& origin, openvdb::Index off, const openvdb::Coord& ijk,
+                           const openvdb::Vec3d& world, const NoiseTexture* noise)
+{
+    if (mInputLeaves.enabled()) {
+        float v = 0.0f;
+        if (noise) {
+            v = noise->voxel(ijk);
+        } else {
+            // The narrowest line level's spot texture at the voxel centre.
+            float s[2];
+            mInputSpots->sample(ijk.asVec3d(), s);
+            v = std::min(s[0], 1.0f);
+        }
+        mInputLeaves.leaf(b, origin).setValueOn(off, v);
+    }
+    if (mTangentLeaves.enabled()) {
+        // Unit flow direction at the voxel centre (zero at critical points), for illuminated lines
+        // in renderers.
+        openvdb::Vec3s t(0.0f);
+        openvdb::Vec3d v;
+        if (mField.sample(world, v)) {
+            const double len = v.length();
+            if (len > mField.maxSpeed() * 1e-6) t = openvdb::Vec3s(v / len);
+        }
+        mTangentLeaves.leaf(b, origin).setValueOn(off, t);
+    }
+    if (mInputs.color) {
+        const double t = unitOf(mInputs.color, world, mSettings.colorRange);
+        mScalarLeaves.leaf(b, origin).setValueOn(off, float(t));
+        mColorLeaves.leaf(b, origin).setValueOn(off, openvdb::Vec3s(mInputs.colormap->linear(t)));
+    }
+}
+
+void Compositor::finish()
+{
+    Moments all;
+    for (const Moments& m : mMoments) all.merge(m); // brick order: the same sums for any thread count
+    mMoments.clear();
+    if (all.count > 0) mRaw = all.stats();
+}
+
+std::string Compositor::packMoments(const std::vector<std::size_t>& ids) const
+{
+    std::string out;
+    for (std::size_t id : ids) {
+        const std::uint64_t i = id;
+        out.append(reinterpret_cast<const char*>(&i), sizeof i);
+        out.append(reinterpret_cast<const char*>(&mMoments.at(id)), sizeof(Moments));
+    }
+    return out;
+}
+
+void Compositor::unpackMoments(const std::string& bytes)
+{
+    constexpr std::size_t kRecord = sizeof(std::uint64_t) + sizeof(Moments);
+    if (bytes.size() % kRecord != 0) throw Error("malformed brick statistics message");
+    for (std::size_t at = 0; at < bytes.size(); at += kRecord) {
+        std::uint64_t id = 0;
+        std::memcpy(&id, bytes.data() + at, sizeof id);
+        if (id >= mMoments.size()) throw Error("brick statistics for brick " + std::to_string(id) + " out of range");
+        std::memcpy(&mMoments[id], bytes.data() + at + sizeof id, sizeof(Moments));
+    }
+}
+
+void Compositor::composeLeaves(int f, LeafSet<openvdb::FloatGrid>& density, LeafSet<openvdb::FloatGrid>& halo,
+                               std::vector<LeafSet<openvdb::FloatGrid>>& lines,
+                               std::vector<LeafSet<openvdb::FloatGrid>>& halos)
+{
+    const int C = mSettings.textureChannels(), frames = mSettings.frames;
+    const bool spots = mSettings.spots, inPlace = !spots && f == frames && frames == 1;
+    const FramePhase ph(f, frames);
+    const ContrastStretch stretch(mRaw, ContrastStretch::kSigmas, mSettings.stretch);
+    const ThreadLimit threadLimit(mSettings.threads);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mDomain.blockCount()), [&](const auto& range) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b) {
+            const FloatLeaf* raw0 = mRawLeaves[0].at(b);
+            if (!raw0) continue;
+            const openvdb::Coord origin = raw0->origin();
+            auto rawAt = [&](int c, openvdb::Index off) { return mRawLeaves[std::size_t(c)].at(b)->getValue(off); };
+            auto value = [&](int c, openvdb::Index off) {
+                return frames > 1 ? rippleFrameValue(rawAt(c, off), rawAt(C + c, off), rawAt(2 * C + c, off),
+                                                     rawAt(3 * C, off), rawAt(3 * C + 1, off), ph)
+                                  : rawAt(c, off);
+            };
+            const FloatLeaf* roiLeaf = mRoiLeaves.enabled() ? mRoiLeaves.at(b) : nullptr;
+            if (inPlace) {
+                // A noise still: the raw leaf becomes the density leaf in place.
+                for (auto it = mRawLeaves[0].at(b)->beginValueOn(); it; ++it) {
+                    double v = stretch(*it);
+                    if (roiLeaf) v *= roiLeaf->getValue(it.pos());
+                    it.setValue(float(v));
+                }
+                continue;
+            }
+            FloatLeaf& d = density.make(b, origin);
+            for (auto it = raw0->cbeginValueOn(); it; ++it) {
+                const openvdb::Index off = it.pos();
+                const float roi = roiLeaf ? roiLeaf->getValue(off) : 1.0f;
+                if (!spots) {
+                    d.setValueOn(off, float(stretch(value(0, off)) * roi));
+                    continue;
+                }
+                const float widthT = mWidthLeaves.enabled() ? mWidthLeaves.at(b)->getValue(off) : 0.0f;
+                const SpotVoxel sv = composeSpots([&](int c) { return value(c, off); }, widthT, roi);
+                d.setValueOn(off, sv.density);
+                halo.leaf(b, origin).setValueOn(off, sv.halo);
+                for (int k = 0; k < int(lines.size()); ++k) {
+                    lines[std::size_t(k)].leaf(b, origin).setValueOn(off, sv.lines[k]);
+                    halos[std::size_t(k)].leaf(b, origin).setValueOn(off, sv.halos[k]);
+                }
+            }
+        }
+    });
+}
+
+openvdb::GridPtrVec Compositor::frame(int f)
+{
+    const int K = mSettings.levels, frames = mSettings.frames;
+    const bool spots = mSettings.spots, last = f == frames;
+    const std::size_t blocks = mDomain.blockCount();
+    openvdb::GridPtrVec grids;
+    auto addLevels = [&](std::vector<LeafSet<openvdb::FloatGrid>>& lines, std::vector<LeafSet<openvdb::FloatGrid>>& halos) {
+        for (int k = 0; k < int(lines.size()); ++k) {
+            grids.push_back(lines[std::size_t(k)].release(mDomain, "density_w" + std::to_string(k + 1)));
+            grids.push_back(halos[std::size_t(k)].release(mDomain, "halo_w" + std::to_string(k + 1)));
+        }
+    };
+    if (spots && frames == 1) {
+        grids.push_back(mDensity.release(mDomain, "density"));
+        grids.push_back(mHalo.release(mDomain, "halo"));
+        addLevels(mLines, mHalos);
+    } else {
+        // Compose this frame leaf by leaf from the kept channels.
+        LeafSet<openvdb::FloatGrid> density, halo;
+        std::vector<LeafSet<openvdb::FloatGrid>> lines, halos;
+        density.init(blocks);
+        if (spots) {
+            halo.init(blocks);
+            if (mSettings.writeSeries) {
+                lines.resize(std::size_t(K));
+                halos.resize(std::size_t(K));
+                for (auto& s : lines) s.init(blocks);
+                for (auto& s : halos) s.init(blocks);
+            }
+        }
+        composeLeaves(f, density, halo, lines, halos);
+        if (!spots && last && frames == 1) {
+            grids.push_back(mRawLeaves[0].release(mDomain, "density"));
+        } else {
+            grids.push_back(density.release(mDomain, "density"));
+            if (spots) {
+                grids.push_back(halo.release(mDomain, "halo"));
+                addLevels(lines, halos);
+            }
+        }
+        if (last) { // the kept channels are not needed any more
+            mRawLeaves.clear();
+            mWidthLeaves = {};
+            mRoiLeaves = {};
+        }
+    }
+    buildStatic();
+    grids.insert(grids.end(), mStatic.begin(), mStatic.end());
+    return grids;
+}
+
+void Compositor::buildStatic()
+{
+    if (mStaticBuilt) return;
+    mStaticBuilt = true;
+    if (mInputLeaves.enabled()) mStatic.push_back(mInputLeaves.release(mDomain, "input"));
+    if (mTangentLeaves.enabled()) mStatic.push_back(mTangentLeaves.release(mDomain, "tangent"));
+    if (mColorLeaves.enabled()) {
+        auto color = mColorLeaves.release(mDomain, "color");
+        color->insertMeta("licvdb_color_space", openvdb::StringMetadata("scene-linear Rec.709"));
+        mStatic.push_back(color);
+        mStatic.push_back(mScalarLeaves.release(mDomain, "scalar"));
+    }
+}
+
+} // namespace lic

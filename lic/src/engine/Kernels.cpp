@@ -1,0 +1,69 @@
+#include "lic/engine/Kernels.h"
+
+#include "lic/texture/Spots.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace lic {
+
+double spotPeak(const LicSettings& settings, double radius)
+{
+    const int n = settings.halfSamples();
+    const double h = settings.step;
+    const int reach = int(std::ceil((radius + 1.0) / h)) + 1;
+    const int M = 2 * n + reach + 2;
+    const std::size_t N = std::size_t(2 * M + 1);
+    std::vector<double> vals(N), win(N), norm(N), scratch;
+    double peak = 0.0;
+    for (double phase : {0.0, 0.25, 0.5, 0.75}) {
+        for (std::size_t j = 0; j < N; ++j) {
+            double slope;
+            vals[j] = spotProfile(std::abs((double(j) - M + phase) * h), radius, slope);
+        }
+        detail::windowSums(settings.kernel, settings.decay, n, N, 1, vals.data(), win.data(), norm.data(), scratch);
+        // Interior windows only (complete on both sides).
+        for (std::size_t i = std::size_t(n); i + std::size_t(n) < N; ++i) peak = std::max(peak, win[i] / norm[i]);
+    }
+    return peak;
+}
+
+namespace detail {
+
+void windowSums(KernelType kernel, double decay, int n, std::size_t N, int W, const double* vals, double* win,
+                double* norm, std::vector<double>& scratch)
+{
+    const std::size_t nn = std::size_t(n);
+    if (kernel == KernelType::Box) {
+        scratch.assign((N + 1) * std::size_t(W), 0.0); // prefix sums
+        for (std::size_t i = 0; i < N; ++i)
+            for (int c = 0; c < W; ++c) scratch[(i + 1) * W + c] = scratch[i * W + c] + vals[i * W + c];
+        for (std::size_t i = 0; i < N; ++i) {
+            const std::size_t a = i >= nn ? i - nn : 0, b = std::min(N - 1, i + nn);
+            for (int c = 0; c < W; ++c) win[i * W + c] = scratch[(b + 1) * W + c] - scratch[a * W + c];
+            norm[i] = double(b - a + 1);
+        }
+        return;
+    }
+    scratch.assign((N + 1) * std::size_t(W), 0.0); // E_i, with E_N = 0
+    for (std::size_t i = N; i-- > 0;)
+        for (int c = 0; c < W; ++c) scratch[i * W + c] = vals[i * W + c] + decay * scratch[(i + 1) * W + c];
+    const double cn1 = std::pow(decay, double(n + 1));
+    for (std::size_t i = 0; i < N; ++i) {
+        const std::size_t end = i + nn + 1; // first sample past the window
+        for (int c = 0; c < W; ++c)
+            win[i * W + c] = scratch[i * W + c] - (end < N ? cn1 * scratch[end * W + c] : 0.0);
+        const double K = double(std::min(nn, N - 1 - i)); // window is samples i … i+K
+        norm[i] = (1.0 - std::pow(decay, K + 1.0)) / (1.0 - decay);
+    }
+}
+
+int ripplePeriod(const LicSettings& settings)
+{
+    // One ripple per window, either kernel: the 2n+1 samples of a box window, the n+1 of an exp one.
+    const int n = settings.halfSamples();
+    return settings.kernel == KernelType::Box ? 2 * n + 1 : n + 1;
+}
+
+} // namespace detail
+} // namespace lic
