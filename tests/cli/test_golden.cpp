@@ -11,7 +11,7 @@
 #include <gtest/gtest.h>
 
 #include "CliRun.h"
-#include "vdbexport/Sha256.h"
+#include "vdbexport/io/Sha256.h"
 
 #include <OpenImageIO/imageio.h>
 #include <nlohmann/json.hpp>

@@ -1,5 +1,6 @@
 #include "Input.h"
 
+#include "lic/engine/Engine.h"
 #include "lic/field/Bricks.h"
 #include "lic/util/Error.h"
 #include "lic/field/Region.h"

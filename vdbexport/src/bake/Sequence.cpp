@@ -201,6 +201,8 @@ void checkSameGrid(const FieldShare& share, const std::string& path, int number,
 /// What the sequence keeps from frame to frame.
 struct SequenceState
 {
+    SequenceState(const Recipe& r, const FieldFrames& f) : recipe(r), frames(f), resolved(r.toJson()), texture(r) {}
+
     const Recipe& recipe;
     const FieldFrames& frames;
     const nlohmann::json resolved;
@@ -292,7 +294,7 @@ nlohmann::json bakeSequence(const Recipe& request, lic::Progress& outer)
     raiseFileLimit(std::size_t(count) + 1);
     openvdb::initialize();
     FrameProgress progress(outer);
-    SequenceState seq{recipe, frames, recipe.toJson(), {}, CarriedTexture(recipe)};
+    SequenceState seq(recipe, frames);
     for (int k = 0; k < count; ++k) bakeFrame(seq, k, progress);
 
     // One manifest for the sequence, then every file at once.

@@ -4,7 +4,7 @@
 // brick's result depends only on the brick (see engine/Bricks.h) and never on the thread count.
 #pragma once
 
-#include "lic/engine/Bricks.h"
+#include "lic/field/Bricks.h"
 #include "lic/engine/Settings.h"
 #include "lic/field/OutputDomain.h"
 #include "lic/util/Parallel.h"
