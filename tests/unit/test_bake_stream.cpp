@@ -13,11 +13,14 @@
 #include <gtest/gtest.h>
 #include <openvdb/io/File.h>
 #include <tbb/global_control.h>
+#include <tbb/task_scheduler_observer.h>
 
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <map>
+#include <mutex>
+#include <thread>
 #include <set>
 
 namespace fs = std::filesystem;
@@ -173,6 +176,58 @@ TEST_F(StreamBake, EveryGridIsBitIdenticalForOneToFourThreads)
         for (int f = 1; f <= 3; ++f)
             expectSameFiles(vdbexport::framePath(spotLoop1, f, 3), vdbexport::framePath(r.output.path, f, 3),
                             "spot loop frame " + std::to_string(f));
+    }
+}
+
+/// Counts TBB worker threads that join any arena while it observes (global observer).
+class WorkerCounter : public tbb::task_scheduler_observer
+{
+public:
+    WorkerCounter() { observe(true); }
+    ~WorkerCounter() override { observe(false); }
+    void on_scheduler_entry(bool isWorker) override
+    {
+        if (!isWorker) return;
+        const std::lock_guard lock(mMutex);
+        mWorkers.insert(std::this_thread::get_id());
+    }
+    std::size_t workers()
+    {
+        const std::lock_guard lock(mMutex);
+        return mWorkers.size();
+    }
+
+private:
+    std::mutex mMutex;
+    std::set<std::thread::id> mWorkers;
+};
+
+// `threads` bounds every parallel stage of a bake (field preparation, output domain, scalar
+// ranges, the convolution, compositing, a sequence's advection), not just the convolution: with
+// threads = 1 no TBB worker joins in at all. The control run with all cores shows the observer
+// sees workers when they do join.
+TEST_F(StreamBake, OneThreadMeansNoWorkerInAnyStage)
+{
+    vdbexport::Recipe spots = spotRecipe("t1_spots.vdb");
+    spots.threads = 1;
+    spots.roi = vdbexport::RoiSpec{"speed", {0.2, 5.0}, "pre"};
+    vdbexport::Recipe noise = recipe("t1_noise.vdb");
+    noise.threads = 1;
+    noise.animation.frames = 3;
+    noise.output.writeInput = true;
+    noise.color = vdbexport::ColorSpec{"helicity", "viridis", std::nullopt};
+    {
+        WorkerCounter counter;
+        vdbexport::bake(spots);
+        vdbexport::bake(noise);
+        EXPECT_EQ(counter.workers(), 0u) << "a stage ran on TBB workers although threads = 1";
+    }
+    if (std::thread::hardware_concurrency() >= 2) {
+        WorkerCounter counter;
+        vdbexport::Recipe all = recipe("t0_noise.vdb");
+        all.threads = 0;
+        vdbexport::bake(all);
+        EXPECT_GT(counter.workers(), 0u) << "the observer saw no worker with every core allowed";
     }
 }
 

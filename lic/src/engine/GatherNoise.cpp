@@ -1,5 +1,6 @@
 // The gather engines over per-brick noise, compiled once here (the engine table points at them).
 #include "lic/engine/Gather.h"
+#include "lic/texture/Noise.h"
 
 namespace lic {
 

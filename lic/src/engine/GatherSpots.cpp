@@ -1,6 +1,7 @@
 // The gather engines over the K-level spot texture (K = 1 … 4), compiled once here for every K
 // (the engine table points at them).
 #include "lic/engine/Gather.h"
+#include "lic/texture/Spots.h"
 
 #include <array>
 

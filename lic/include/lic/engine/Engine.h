@@ -13,8 +13,6 @@
 #include "lic/field/Bricks.h"
 #include "lic/field/Field.h"
 #include "lic/field/OutputDomain.h"
-#include "lic/texture/Noise.h"
-#include "lic/texture/Spots.h"
 #include "lic/util/Progress.h"
 
 #include <span>
@@ -22,6 +20,9 @@
 #include <vector>
 
 namespace lic {
+
+class NoiseBrickSource; // texture/Noise.h
+struct SpotSet;         // texture/Spots.h
 
 /// A convolution over some bricks: the field, the output domain, the bricks to convolve (a
 /// whole layout, or one process's share of it) and the settings.
