@@ -13,6 +13,8 @@
 #include "lic/field/Presets.h"
 #include "lic/texture/Advection.h"
 
+#include "TestFields.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <openvdb/io/File.h>
@@ -148,6 +150,83 @@ TEST(AdvectedNoiseTest, UniformFlowCarriesTheNoiseExactly)
     const auto dim = box.dim();
     EXPECT_EQ(noise.stats().entered, std::uint64_t(2) * dim[1] * dim[2]);
     EXPECT_EQ(noise.stats().refreshed, 0u);
+}
+
+namespace {
+/// Fraction of the output voxels at least `margin` from the inflow face (x min) whose carried
+/// noise is the first frame's white noise at the voxel shifted back by `shift` output voxels along
+/// x, rounded: what exact carrying gives after a cumulative displacement of `shift`.
+double carriedFraction(const lic::AdvectedNoise& noise, const lic::OutputDomain& domain, double shift, int margin)
+{
+    const openvdb::CoordBBox box = domain.indexBBox();
+    std::size_t same = 0, checked = 0;
+    for (auto it = box.begin(); it; ++it) {
+        const openvdb::Coord c = *it;
+        if (c[0] < box.min()[0] + margin) continue;
+        const int from = int(std::floor(double(c[0]) - shift + 0.5));
+        ++checked;
+        same += noise.raw(c) == lic::whiteNoise(7, from, c[1], c[2]);
+    }
+    return double(same) / double(checked);
+}
+} // namespace
+
+// Carrying at sub-voxel speeds: the sub-voxel part of each back-trace accumulates, so a flow of
+// 0.3 (or 1.3) output voxels per frame moves the texture 0.3·k (1.3·k) voxels after k frames. A
+// back-trace that dropped the sub-voxel part would freeze the texture at 0.3 voxels per frame
+// (and lose 0.3 voxels a frame at 1.3).
+TEST(AdvectedNoiseTest, SubVoxelSpeedsAccumulate)
+{
+    const lic::PresetField f = lic::makePresetField("uniform", openvdb::Coord(17));
+    const lic::VelocityField field(f.velocity);
+    const lic::OutputDomain domain(field, 2);
+    const double outputVoxel = field.voxelSize()[0] / 2.0; // world units, v = 1
+    for (const double speed : {0.3, 1.3}) {
+        lic::AdvectedNoise noise(7);
+        noise.start(domain);
+        for (int k = 1; k <= 8; ++k) {
+            noise.advance(domain, field, speed * outputVoxel);
+            const double shift = speed * k;
+            if (std::abs(std::abs(shift - std::floor(shift)) - 0.5) < 0.05) continue; // a tie: either voxel is right
+            const double exact = carriedFraction(noise, domain, shift, int(std::ceil(shift)) + 1);
+            std::printf("speed %.1f, frame %d: %.4f of the voxels carry the noise from %.1f voxels upstream\n", speed,
+                        k + 1, exact, shift);
+            EXPECT_GE(exact, 0.97) << "speed " << speed << " after " << k << " frames";
+            if (std::abs(shift - std::round(shift)) > 0.2) {
+                // A texture frozen at the nearest whole shift would not match.
+                EXPECT_LT(carriedFraction(noise, domain, std::round(shift) + (shift > std::round(shift) ? -1 : 1), 12), 0.2);
+            }
+            EXPECT_EQ(noise.stats().refreshed, 0u) << "uniform flow stretches nothing";
+        }
+    }
+}
+
+// Refresh fires where the flow squeezes the carried coordinates, and not before: in v = (αx, 0, 0)
+// the back-trace maps x to about e^{−αΔt}·x each frame, so neighbouring voxels' coordinates close in
+// on each other (the texture is stretched out along x). Nothing is refreshed while they are still
+// ≥ ¾ voxel apart; by the time the flow has squeezed them below ½ (e^{−αt} < ½), most voxels have
+// been refreshed.
+TEST(AdvectedNoiseTest, StretchingFlowRefreshesWhereTheTextureIsSqueezed)
+{
+    const double alpha = 1.0, dt = 0.1; // e^{−αt} falls below ½ at t ≈ 0.69: frame 7
+    const auto grid = lictest::makeField(openvdb::Coord(33, 9, 9), 1.0 / 16.0, openvdb::Vec3d(-1.0, 0.0, 0.0),
+                                         [&](const openvdb::Vec3d& p) { return openvdb::Vec3d(alpha * p[0], 0.0, 0.0); });
+    const lic::VelocityField field(grid);
+    const lic::OutputDomain domain(field, 2);
+    lic::AdvectedNoise noise(7);
+    noise.start(domain);
+    std::uint64_t early = 0, byHalf = 0;
+    for (int k = 1; k <= 7; ++k) {
+        noise.advance(domain, field, dt);
+        const double squeeze = std::exp(-alpha * dt * k);
+        std::printf("t = %.1f: e^-at %.3f, refreshed %llu of %llu\n", dt * k, squeeze,
+                    (unsigned long long)noise.stats().refreshed, (unsigned long long)noise.stats().voxels);
+        if (squeeze >= 0.75) early += noise.stats().refreshed;
+        byHalf += noise.stats().refreshed;
+    }
+    EXPECT_EQ(early, 0u) << "refreshed before the texture was squeezed";
+    EXPECT_GT(double(byHalf), 0.5 * double(domain.activeVoxelCount()))
+        << "the texture was squeezed below half a voxel but most of it was never refreshed";
 }
 
 TEST(SpotFlockTest, SpotsMoveWithTheFlowAndFadeInAndOut)
