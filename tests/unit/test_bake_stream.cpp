@@ -6,6 +6,8 @@
 
 #include "lic/field/ScalarField.h"
 
+#include "ManifestDigests.h"
+
 #include "lic/util/Error.h"
 #include "lic/field/Presets.h"
 #include "lic/field/Scalars.h"
@@ -155,6 +157,7 @@ TEST_F(StreamBake, EveryGridIsBitIdenticalForOneToFourThreads)
         if (threads == 1) {
             loop1 = r.output.path;
             stats1 = stats;
+            lictest::expectManifestDigests(vdbexport::manifestPath(r.output.path), 4);
             continue;
         }
         EXPECT_EQ(stats.dump(), stats1.dump()) << threads << " threads";
@@ -171,6 +174,7 @@ TEST_F(StreamBake, EveryGridIsBitIdenticalForOneToFourThreads)
         vdbexport::bake(r);
         if (threads == 1) {
             spotLoop1 = r.output.path;
+            lictest::expectManifestDigests(vdbexport::manifestPath(r.output.path), 3);
             continue;
         }
         for (int f = 1; f <= 3; ++f)

@@ -13,6 +13,7 @@
 #include "lic/field/Presets.h"
 #include "lic/texture/Advection.h"
 
+#include "ManifestDigests.h"
 #include "TestFields.h"
 
 #include <gtest/gtest.h>
@@ -290,6 +291,7 @@ TEST_F(Unsteady, FilesMetadataAndManifest)
     ASSERT_EQ(m["files"].size(), 8u);
     EXPECT_EQ(m["files"][0], "meta_0001.vdb");
     EXPECT_EQ(m["sha256"].size(), 8u);
+    lictest::expectManifestDigests(s["manifest"].get<std::string>(), 8);
 }
 
 TEST_F(Unsteady, ChangingFlowKeepsBrightnessAndSpotDensitySteady)
