@@ -12,6 +12,8 @@
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
+#include <csignal>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -164,8 +166,66 @@ std::string prepareAtomicWrite(const std::string& path)
     if (fs::is_directory(p, ec))
         throw lic::InputError("cannot write " + quote(path)
                               + ": it is a directory; expected a file path");
+    removeStaleTemporaries(path);
     return path + ".tmp-" + std::to_string(::getpid());
 }
+
+void removeStaleTemporaries(const std::string& path)
+{
+    // PATH.tmp-PID (a named temporary) and PATH.tmp-PID-N (a commit's link, renamed a moment
+    // later) of a process that no longer exists: what a process killed (SIGKILL cannot be
+    // caught) while writing PATH left behind.
+    const fs::path p(path);
+    fs::path dir = p.parent_path();
+    if (dir.empty()) dir = ".";
+    const std::string prefix = p.filename().string() + ".tmp-";
+    std::error_code ec;
+    for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+        const std::string name = it->path().filename().string();
+        if (name.rfind(prefix, 0) != 0) continue;
+        const std::string rest = name.substr(prefix.size());
+        const std::size_t digits = rest.find_first_not_of("0123456789");
+        if (digits == 0 || (digits != std::string::npos && rest[digits] != '-')) continue;
+        const long pid = std::strtol(rest.c_str(), nullptr, 10);
+        if (pid <= 0 || pid == long(::getpid())) continue;
+        if (::kill(pid_t(pid), 0) == 0 || errno != ESRCH) continue; // alive (or not ours to judge)
+        std::error_code rm;
+        fs::remove(it->path(), rm);
+    }
+}
+
+namespace {
+
+/// Test seam, read only by tests: $LICVDB_TEST_COMMIT_HOOK = "POINT ACTION". POINT is `staged`
+/// (every file staged, none linked, the lock not yet taken), `locked` (the lock held, none linked)
+/// or `linked:N` (N files renamed into place, in the order added: a bake's frames, then its
+/// manifest). ACTION is `kill` (SIGKILL to this process), `stop` (SIGSTOP: the test inspects the
+/// disk, then continues or kills it) or `touch:FILE` (create FILE, then go on).
+void commitHook(const std::string& point)
+{
+    static const char* spec = std::getenv("LICVDB_TEST_COMMIT_HOOK");
+    if (!spec) return;
+    const std::string s(spec);
+    const std::size_t space = s.find(' ');
+    if (space == std::string::npos || s.substr(0, space) != point) return;
+    const std::string action = s.substr(space + 1);
+    if (action == "kill") ::kill(::getpid(), SIGKILL);
+    else if (action == "stop") ::kill(::getpid(), SIGSTOP);
+    else if (action.rfind("touch:", 0) == 0) std::ofstream(action.substr(6)).put('\n');
+}
+
+/// Test seam: $LICVDB_TEST_NO_O_TMPFILE=1 stages named temporaries, as on a file system without
+/// O_TMPFILE.
+bool noTmpfile()
+{
+    static const bool off = [] {
+        const char* v = std::getenv("LICVDB_TEST_NO_O_TMPFILE");
+        return v && std::string(v) == "1";
+    }();
+    return off;
+}
+
+} // namespace
 
 /// Flush `tmp` to disk, then rename it over `path`. Removes `tmp` and throws lic::Error on failure.
 void commitAtomicWrite(const std::string& tmp, const std::string& path)
@@ -554,7 +614,7 @@ OutputSet::Staged OutputSet::stage(const std::string& path)
     fs::path dir = fs::path(path).parent_path();
     if (dir.empty()) dir = ".";
     // An unnamed file in the target directory: a process killed before commit() leaves nothing.
-    f.fd = ::open(dir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0666);
+    f.fd = detail::noTmpfile() ? -1 : ::open(dir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0666);
     if (f.fd < 0) f.named = named; // no O_TMPFILE on this file system: a named temporary
     return f;
 }
@@ -659,6 +719,7 @@ void OutputSet::commit()
         const fs::path d = fs::path(f.path).parent_path();
         dirs.insert(d.empty() ? "." : d.string());
     }
+    detail::commitHook("staged");
     std::vector<int> locks;
     const auto unlock = [&] {
         for (const int fd : locks) ::close(fd); // closing releases the flock
@@ -671,6 +732,7 @@ void OutputSet::commit()
         locks.push_back(fd); // a file system without flock: commit unlocked (the checksums still tell)
     }
     try {
+        detail::commitHook("locked");
         int n = 0;
         for (auto& f : mFiles) {
             std::error_code ec;
@@ -692,6 +754,7 @@ void OutputSet::commit()
                 if (ec) throw lic::Error("cannot write " + quote(f.path) + ": renaming " + quote(f.named) + " failed (" + ec.message() + ")");
                 f.named.clear();
             }
+            detail::commitHook("linked:" + std::to_string(&f - mFiles.data() + 1));
         }
     } catch (...) {
         unlock();

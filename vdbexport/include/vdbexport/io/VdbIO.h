@@ -60,9 +60,11 @@ void writeTextAtomic(const std::string& path, const std::string& text);
 /// Each add*() writes a complete, checked file to an unnamed temporary file in the target's
 /// directory (O_TMPFILE; a named `PATH.tmp-<pid>` where the file system lacks it) and records its
 /// SHA-256. commit() takes an exclusive flock on each target directory, then links and renames
-/// every file into place in the order added: two processes committing to the same paths never
-/// interleave, so the last commit wins whole. A process killed before commit() leaves no file,
-/// temporary or final; the destructor discards whatever was not committed.
+/// every file into place in the order added (a bake adds its frames, then its manifest: a manifest
+/// on disk means its frames are): two processes committing to the same paths never interleave, so
+/// the last commit wins whole. A process killed before commit() leaves no final file; with
+/// O_TMPFILE no temporary either, and without it (a named PATH.tmp-PID) the next write of PATH
+/// removes what a killed process left. The destructor discards whatever was not committed.
 class OutputSet
 {
 public:
@@ -104,6 +106,11 @@ namespace detail {
 /// commitAtomicWrite). Shared by the VDB, text and image writers.
 /// @throw lic::InputError naming the path and the problem.
 std::string prepareAtomicWrite(const std::string& path);
+
+/// Remove the temporaries of `path` (PATH.tmp-PID, PATH.tmp-PID-N) that a process no longer
+/// running left behind: a process killed outright (SIGKILL) while writing on a file system without
+/// O_TMPFILE cannot remove its named temporary; the next write of the same path does.
+void removeStaleTemporaries(const std::string& path);
 
 /// Flush `tmp` to disk, then rename it over `path`. Removes `tmp` and throws lic::Error on failure.
 void commitAtomicWrite(const std::string& tmp, const std::string& path);
