@@ -419,7 +419,8 @@ inline float specPow(float x, float n, int ni)
 class BrickWalk
 {
 public:
-    BrickWalk(const openvdb::Vec3d& q0, const openvdb::Vec3d& qd, double t0, int bx, int by, int bz)
+    [[gnu::always_inline]] BrickWalk(const openvdb::Vec3d& q0, const openvdb::Vec3d& qd, double t0, int bx, int by,
+                                     int bz)
         : mCount{bx, by, bz}
     {
         const openvdb::Vec3d qs = q0 + qd * t0;
@@ -450,7 +451,7 @@ public:
     }
     /// Step into the next brick, whose entry parameter goes to `entry`; false when the ray leaves
     /// the grid of bricks.
-    bool next(double& entry)
+    [[gnu::always_inline]] bool next(double& entry)
     {
         int a = 0;
         if (mNext[1] < mNext[a]) a = 1;
@@ -499,7 +500,8 @@ public:
           mTau(mSettings.densityScale * mSettings.step), mLo(float(mSettings.densityLow)),
           mInvWindow(float(1.0 / (mSettings.densityHigh - mSettings.densityLow))), mThreshold(float(mSettings.haloThreshold)),
           mView(-rayDir), mLight(headlight ? mView : openvdb::Vec3f(lightDir)),
-          mShininess(float(mSettings.lighting.shininess)),
+          mAmbient(float(mSettings.lighting.ambient)), mDiffuse(float(mSettings.lighting.diffuse)),
+          mSpecular(float(mSettings.lighting.specular)), mShininess(float(mSettings.lighting.shininess)),
           mShininessInt((mShininess == std::floor(mShininess) && mShininess <= 256.0f) ? int(mShininess) : -1),
           mDensity(Lit ? nullptr : impl.density.data()), mPacked(Lit ? impl.packed.data() : nullptr),
           mSy(std::size_t(impl.nx)), mSz(std::size_t(impl.nx) * std::size_t(impl.ny))
@@ -619,17 +621,16 @@ private:
     /// (any length), and its specular term into `spec`, from V·R = √(1−(L·T)²)·√(1−(V·T)²) − (L·T)(V·T).
     [[gnu::always_inline]] float lineLight(const openvdb::Vec3f& ts, float& spec) const
     {
-        const float ka = float(mSettings.lighting.ambient), kd = float(mSettings.lighting.diffuse);
         const float len2 = ts.lengthSqr();
-        if (!(len2 > 1e-12f)) return ka + kd;
+        if (!(len2 > 1e-12f)) return mAmbient + mDiffuse;
         const float inv = 1.0f / std::sqrt(len2);
         const float lt = mLight.dot(ts) * inv, vt = mView.dot(ts) * inv;
         // √(1 − (L·T)²) = |L × T| for unit vectors, accurate near parallel.
         const float sl = mLight.cross(ts).length() * inv;
         const float sv = mView.cross(ts).length() * inv;
         const float vr = sl * sv - lt * vt;
-        spec = vr > 0.0f ? float(mSettings.lighting.specular) * specPow(vr, mShininess, mShininessInt) : 0.0f;
-        return ka + kd * sl;
+        spec = vr > 0.0f ? mSpecular * specPow(vr, mShininess, mShininessInt) : 0.0f;
+        return mAmbient + mDiffuse * sl;
     }
 
     const Impl& mImpl;
@@ -639,7 +640,7 @@ private:
     const double mTau; ///< optical depth per step at windowed density 1
     const float mLo, mInvWindow, mThreshold;
     const openvdb::Vec3f mView, mLight; ///< unit directions towards the eye and the light
-    const float mShininess;
+    const float mAmbient, mDiffuse, mSpecular, mShininess;
     const int mShininessInt;
     const float* const mDensity;
     const openvdb::Vec4f* const mPacked;
