@@ -1,7 +1,6 @@
 #include "lic/render/Raycaster.h"
 
 #include "lic/util/Error.h"
-#include "lic/util/Names.h"
 #include "lic/util/Parallel.h"
 
 #include <openvdb/tools/Dense.h>
@@ -17,219 +16,6 @@
 #include <sstream>
 
 namespace lic {
-
-namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-double radians(double deg) { return deg * kPi / 180.0; }
-double degrees(double rad) { return rad * 180.0 / kPi; }
-
-/// sin and cos of an angle in degrees, exact at multiples of 90° (named views get exact axes).
-double sinDeg(double deg)
-{
-    const double r = std::fmod(deg, 360.0);
-    if (r == 0.0 || std::abs(r) == 180.0) return 0.0;
-    if (r == 90.0 || r == -270.0) return 1.0;
-    if (r == -90.0 || r == 270.0) return -1.0;
-    return std::sin(radians(deg));
-}
-double cosDeg(double deg) { return sinDeg(deg + 90.0); }
-
-std::string num(double v)
-{
-    std::ostringstream s;
-    s << v;
-    return s.str();
-}
-
-} // namespace
-
-// ---- cameras --------------------------------------------------------------------------------
-
-const char* toString(Projection p) { return p == Projection::Perspective ? "perspective" : "orthographic"; }
-
-double Camera::fovX() const
-{
-    const double ty = std::tan(radians(fovY) * 0.5);
-    return degrees(2.0 * std::atan(ty * double(width) / double(height)));
-}
-
-openvdb::math::Ray<double> Camera::ray(double x, double y) const
-{
-    const double u = 2.0 * x / double(width) - 1.0;  // −1 … 1, left → right
-    const double v = 1.0 - 2.0 * y / double(height); // −1 … 1, bottom → top
-    if (projection == Projection::Orthographic) {
-        const openvdb::Vec3d o = position + right * (u * 0.5 * orthoWidth) + up * (v * 0.5 * orthoHeight);
-        return openvdb::math::Ray<double>(o, forward);
-    }
-    const double ty = std::tan(radians(fovY) * 0.5);
-    const double tx = ty * double(width) / double(height);
-    openvdb::Vec3d d = forward + right * (u * tx) + up * (v * ty);
-    d.normalize();
-    return openvdb::math::Ray<double>(position, d);
-}
-
-namespace {
-constexpr EnumName<View> kViewNames[] = {{View::Front, "front"}, {View::Back, "back"},   {View::Left, "left"},
-                                         {View::Right, "right"}, {View::Top, "top"}, {View::Bottom, "bottom"}};
-constexpr EnumName<StereoMode> kStereoNames[] = {{StereoMode::None, "none"},
-                                                 {StereoMode::SideBySide, "sbs", "side by side"},
-                                                 {StereoMode::Anaglyph, "anaglyph"},
-                                                 {StereoMode::SideBySide, "side-by-side"},
-                                                 {StereoMode::None, ""}};
-} // namespace
-
-View viewFromString(const std::string& s) { return valueOf<View>(kViewNames, s, "view"); }
-
-const char* toString(View v) { return nameOf<View>(kViewNames, v); }
-
-std::pair<double, double> viewAngles(View v)
-{
-    switch (v) {
-    case View::Front: return {0.0, 0.0};
-    case View::Back: return {180.0, 0.0};
-    case View::Right: return {90.0, 0.0};
-    case View::Left: return {-90.0, 0.0};
-    case View::Top: return {0.0, 90.0};
-    case View::Bottom: return {0.0, -90.0};
-    }
-    return {0.0, 0.0};
-}
-
-void CameraSettings::validate() const
-{
-    if (!std::isfinite(azimuth)) throw InputError("azimuth " + num(azimuth) + " is not a number of degrees");
-    if (!(elevation >= -90.0 && elevation <= 90.0))
-        throw InputError("elevation " + num(elevation) + " is out of range; expected degrees in [-90, 90]");
-    if (distance && !(*distance > 0.0 && std::isfinite(*distance)))
-        throw InputError("distance " + num(*distance) + " is out of range; expected world units > 0");
-    if (!(fovY > 0.0 && fovY < 180.0))
-        throw InputError("field of view " + num(fovY) + " is out of range; expected degrees in (0, 180)");
-    if (orthoHeight && !(*orthoHeight > 0.0 && std::isfinite(*orthoHeight)))
-        throw InputError("orthographic height " + num(*orthoHeight) + " is out of range; expected world units > 0");
-    if (width < 1 || height < 1 || width > 32768 || height > 32768)
-        throw InputError("image size " + std::to_string(width) + "x" + std::to_string(height) +
-                         " is out of range; expected 1 to 32768 pixels each way");
-    if (!(margin >= 0.0 && margin < 0.5)) throw InputError("margin " + num(margin) + " is out of range; expected [0, 0.5)");
-}
-
-Camera makeCamera(const CameraSettings& s, const openvdb::BBoxd& box)
-{
-    s.validate();
-    if (!box.isSorted() || !std::isfinite(box.min()[0]) || !std::isfinite(box.max()[0]))
-        throw InputError("cannot frame an empty bounding box");
-    Camera cam;
-    cam.projection = s.orthographic ? Projection::Orthographic : Projection::Perspective;
-    cam.width = s.width;
-    cam.height = s.height;
-    cam.fovY = s.fovY;
-    cam.azimuth = s.azimuth;
-    cam.elevation = s.elevation;
-    cam.target = box.getCenter();
-
-    const double sa = sinDeg(s.azimuth), ca = cosDeg(s.azimuth), se = sinDeg(s.elevation), ce = cosDeg(s.elevation);
-    const openvdb::Vec3d d(sa * ce, -ca * ce, se); // towards the camera
-    cam.forward = -d;
-    cam.right = openvdb::Vec3d(ca, sa, 0.0);
-    cam.up = cam.right.cross(cam.forward);
-    cam.up.normalize();
-    // Re-orthogonalise right against forward (exact up to rounding already).
-    cam.right = cam.forward.cross(cam.up);
-    cam.right.normalize();
-
-    // Corners relative to the centre, in the camera frame.
-    const double fill = 1.0 - s.margin;
-    double maxX = 0, maxY = 0, radius = 0;
-    std::vector<openvdb::Vec3d> rel;
-    for (int c = 0; c < 8; ++c) {
-        const openvdb::Vec3d p((c & 1) ? box.max()[0] : box.min()[0], (c & 2) ? box.max()[1] : box.min()[1],
-                               (c & 4) ? box.max()[2] : box.min()[2]);
-        const openvdb::Vec3d r = p - cam.target;
-        rel.push_back(r);
-        maxX = std::max(maxX, std::abs(r.dot(cam.right)));
-        maxY = std::max(maxY, std::abs(r.dot(cam.up)));
-        radius = std::max(radius, r.length());
-    }
-    radius = std::max(radius, 1e-12);
-    const double aspect = double(s.width) / double(s.height);
-
-    if (s.orthographic) {
-        double h = s.orthoHeight ? *s.orthoHeight : std::max(2.0 * maxY, 2.0 * maxX / aspect) / fill;
-        if (!(h > 0.0)) h = 2.0 * radius;
-        cam.orthoHeight = h;
-        cam.orthoWidth = h * aspect;
-        cam.distance = s.distance ? *s.distance : 2.0 * radius;
-    } else if (s.distance) {
-        cam.distance = *s.distance;
-    } else {
-        const double ty = std::tan(radians(s.fovY) * 0.5) * fill;
-        const double tx = ty * aspect;
-        double dist = 0.0;
-        for (const auto& r : rel) {
-            const double depth = r.dot(d); // towards the camera
-            dist = std::max(dist, depth + std::abs(r.dot(cam.right)) / tx);
-            dist = std::max(dist, depth + std::abs(r.dot(cam.up)) / ty);
-        }
-        cam.distance = std::max(dist, 1e-9);
-    }
-    cam.position = cam.target + d * cam.distance;
-    return cam;
-}
-
-std::pair<Camera, Camera> stereoPair(const Camera& centre, double eyeSeparation)
-{
-    if (!(eyeSeparation > 0.0 && std::isfinite(eyeSeparation)))
-        throw InputError("eye separation " + num(eyeSeparation) + " is out of range; expected world units > 0");
-    const double half = std::atan(0.5 * eyeSeparation / centre.distance);
-    auto orbit = [&](double angle) {
-        // Rotate position and frame about the axis `up` through the target (Rodrigues).
-        const openvdb::Vec3d k = centre.up;
-        auto rot = [&](const openvdb::Vec3d& v) {
-            return v * std::cos(angle) + k.cross(v) * std::sin(angle) + k * (k.dot(v)) * (1.0 - std::cos(angle));
-        };
-        Camera c = centre;
-        c.position = centre.target + rot(centre.position - centre.target);
-        c.forward = rot(centre.forward);
-        c.right = rot(centre.right);
-        c.up = centre.up;
-        return c;
-    };
-    // A rotation by +angle about `up` moves the camera towards +right (up × d = right): that is
-    // the right eye.
-    Camera right = orbit(half), left = orbit(-half);
-    left.azimuth = right.azimuth = centre.azimuth;
-    return {left, right};
-}
-
-// ---- images ---------------------------------------------------------------------------------
-
-StereoMode stereoFromString(const std::string& s) { return valueOf<StereoMode>(kStereoNames, s, "stereo mode"); }
-
-const char* toString(StereoMode m) { return nameOf<StereoMode>(kStereoNames, m); }
-
-Image sideBySide(const Image& l, const Image& r)
-{
-    if (l.width != r.width || l.height != r.height) throw Error("stereo eyes differ in size");
-    Image out(l.width * 2, l.height);
-    for (int y = 0; y < l.height; ++y) {
-        std::copy_n(l.pixel(0, y), 4 * l.width, out.pixel(0, y));
-        std::copy_n(r.pixel(0, y), 4 * r.width, out.pixel(l.width, y));
-    }
-    return out;
-}
-
-Image anaglyph(const Image& l, const Image& r)
-{
-    if (l.width != r.width || l.height != r.height) throw Error("stereo eyes differ in size");
-    Image out(l.width, l.height);
-    for (std::size_t i = 0; i < out.rgba.size(); i += 4) {
-        out.rgba[i + 0] = l.rgba[i + 0];
-        out.rgba[i + 1] = r.rgba[i + 1];
-        out.rgba[i + 2] = r.rgba[i + 2];
-        out.rgba[i + 3] = std::max(l.rgba[i + 3], r.rgba[i + 3]);
-    }
-    return out;
-}
 
 // ---- transfer -------------------------------------------------------------------------------
 
@@ -247,7 +33,9 @@ std::pair<double, double> lineShade(const Lighting& lt, const openvdb::Vec3d& t,
 void RenderSettings::validate() const
 {
     auto bad = [](const std::string& what, double v, const std::string& expected) {
-        return InputError(what + " " + num(v) + " is out of range; expected " + expected);
+        std::ostringstream msg;
+        msg << what << " " << v << " is out of range; expected " << expected;
+        return InputError(msg.str());
     };
     if (!(densityScale >= 0.0 && std::isfinite(densityScale))) throw bad("density scale", densityScale, "> 0 (or 0 = auto)");
     if (!(densityLow >= 0.0 && densityLow < 1.0)) throw bad("density window low", densityLow, "[0, 1)");
@@ -308,6 +96,62 @@ void requireLinear(const openvdb::GridBase& g)
         throw InputError("grid '" + g.getName() + "' has a non-linear (frustum) transform; expected a linear transform");
 }
 
+/// @throw InputError if `vol` lacks a density grid, has a grid with a non-linear transform, or
+///        `settings` ask for a colormap without a scalar grid.
+void checkVolume(const RenderVolume& vol, const RenderSettings& settings)
+{
+    if (!vol.density) throw InputError("no density grid to render");
+    requireLinear(*vol.density);
+    for (const openvdb::GridBase* g : std::initializer_list<const openvdb::GridBase*>{
+             vol.halo.get(), vol.color.get(), vol.scalar.get(), vol.tangent.get(), vol.flow.get()})
+        if (g) requireLinear(*g);
+    if (settings.colormap && !vol.scalar)
+        throw InputError("a colormap needs a `scalar` grid to colour by, and there is none");
+}
+
+/// The active voxels of the density grid, and with halos of the halo grid, in density index space.
+/// @throw InputError if there are none.
+openvdb::CoordBBox activeBox(const RenderVolume& vol, const RenderSettings& settings,
+                             const openvdb::math::Transform& xform)
+{
+    openvdb::CoordBBox active = vol.density->evalActiveVoxelBoundingBox();
+    if (vol.halo && settings.halos) {
+        // The halo's active box, in density index space.
+        const openvdb::CoordBBox hb = vol.halo->evalActiveVoxelBoundingBox();
+        if (!hb.empty()) {
+            if (vol.halo->transform() == xform) active.expand(hb);
+            else {
+                const openvdb::BBoxd w = vol.halo->transform().indexToWorld(hb);
+                const openvdb::BBoxd i = xform.worldToIndex(w);
+                active.expand(openvdb::CoordBBox(openvdb::Coord::floor(i.min()), openvdb::Coord::ceil(i.max())));
+            }
+        }
+    }
+    if (active.empty() || vol.density->activeVoxelCount() == 0)
+        throw InputError("grid '" + vol.density->getName() + "' has no active voxels; nothing to render");
+    return active;
+}
+
+/// A table of `map` (scene-linear) with 1024 entries over [0, 1].
+std::vector<openvdb::Vec3s> colormapTable(const Colormap& map)
+{
+    std::vector<openvdb::Vec3s> lut(1024);
+    for (int i = 0; i < 1024; ++i) {
+        const openvdb::Vec3d c = map.linear(double(i) / 1023.0);
+        lut[std::size_t(i)] = openvdb::Vec3s(float(c[0]), float(c[1]), float(c[2]));
+    }
+    return lut;
+}
+
+/// `f(i)` for every i in [0, n), in parallel.
+template<typename F>
+void forEachVoxel(std::size_t n, const F& f)
+{
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 16), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
+    });
+}
+
 } // namespace
 
 struct HaloRaycaster::Impl
@@ -330,52 +174,61 @@ struct HaloRaycaster::Impl
     bool useHalo = false;
     bool haveTangent = false; ///< a tangent or flow grid was given
 
+    // Construction, in this order.
+    openvdb::CoordBBox setGeometry(const RenderVolume& vol, const openvdb::CoordBBox& active);
+    void load(const RenderVolume& vol, const openvdb::CoordBBox& dbox, const openvdb::Coord& activeDim,
+              Progress& progress);
+    double autoDensityScale(const openvdb::Coord& activeDim) const;
+    void loadColor(const RenderVolume& vol, const openvdb::CoordBBox& dbox);
+    void loadTangent(const RenderVolume& vol, const openvdb::CoordBBox& dbox);
+    void buildBrickTable();
+    void packDensityAndTangent();
+
+    // Rendering.
     void renderTile(const Camera& cam, Image& img, int x0, int y0, int x1, int y1, RenderStats& st) const;
     void renderPixel(const openvdb::math::Ray<double>& ray, float* px, RenderStats& st, const openvdb::Vec3d& light,
                      bool headlight) const;
     template<bool Lit, bool Halo, bool Colored>
     void march(const openvdb::math::Ray<double>& ray, float* px, RenderStats& st, const openvdb::Vec3d& light,
                bool headlight) const;
+    template<bool Lit, bool Halo, bool Colored>
+    class Marcher;
+    /// The samples of a ray at parameters t0 + (k + ½)·dt, k in [0, kEnd).
+    struct Samples;
+    template<class M>
+    [[gnu::always_inline]] inline void marchBricks(M& marcher, const Samples& samples, const openvdb::Vec3d& q0,
+                                                   const openvdb::Vec3d& qd, RenderStats& st) const;
 };
 
 HaloRaycaster::HaloRaycaster(const RenderVolume& vol, const RenderSettings& settings, Progress& progress)
     : mImpl(std::make_unique<Impl>())
 {
     settings.validate();
+    checkVolume(vol, settings);
     Impl& m = *mImpl;
     m.settings = settings;
-    if (!vol.density) throw InputError("no density grid to render");
-    requireLinear(*vol.density);
-    for (const openvdb::GridBase* g : std::initializer_list<const openvdb::GridBase*>{
-             vol.halo.get(), vol.color.get(), vol.scalar.get(), vol.tangent.get(), vol.flow.get()})
-        if (g) requireLinear(*g);
-    if (settings.colormap && !vol.scalar)
-        throw InputError("a colormap needs a `scalar` grid to colour by, and there is none");
-
     m.xform = vol.density->transform().copy();
-    m.worldToIndex = m.xform->baseMap()->getAffineMap()->getMat4().inverse();
-    const openvdb::Vec3d vs = m.xform->voxelSize();
-    m.voxelLength = std::min({vs[0], vs[1], vs[2]});
-
-    openvdb::CoordBBox active = vol.density->evalActiveVoxelBoundingBox();
-    if (vol.halo && settings.halos) {
-        // The halo's active box, in density index space.
-        const openvdb::CoordBBox hb = vol.halo->evalActiveVoxelBoundingBox();
-        if (!hb.empty()) {
-            if (vol.halo->transform() == *m.xform) active.expand(hb);
-            else {
-                const openvdb::BBoxd w = vol.halo->transform().indexToWorld(hb);
-                const openvdb::BBoxd i = m.xform->worldToIndex(w);
-                active.expand(openvdb::CoordBBox(openvdb::Coord::floor(i.min()), openvdb::Coord::ceil(i.max())));
-            }
-        }
-    }
-    if (active.empty() || vol.density->activeVoxelCount() == 0)
-        throw InputError("grid '" + vol.density->getName() + "' has no active voxels; nothing to render");
+    const openvdb::CoordBBox active = activeBox(vol, settings, *m.xform);
+    const openvdb::CoordBBox dbox = m.setGeometry(vol, active);
     {
-        openvdb::BBoxd ib(active.min().asVec3d() - openvdb::Vec3d(0.5), active.max().asVec3d() + openvdb::Vec3d(0.5));
-        m.worldBox = m.xform->indexToWorld(ib);
+        const ThreadLimit threadLimit(settings.threads);
+        m.load(vol, dbox, active.dim(), progress);
+        m.buildBrickTable();
+        m.haveTangent = !m.tangent.empty();
+        if (!m.settings.lighting.enabled) std::vector<openvdb::Vec3s>().swap(m.tangent); // unlit: not needed
+        if (!m.tangent.empty()) m.packDensityAndTangent();
     }
+}
+
+/// The transforms, the world box of `active` and the dense arrays' box and dims; returns that box.
+/// @throw InputError if it exceeds 2^31 voxels.
+openvdb::CoordBBox HaloRaycaster::Impl::setGeometry(const RenderVolume& vol, const openvdb::CoordBBox& active)
+{
+    worldToIndex = xform->baseMap()->getAffineMap()->getMat4().inverse();
+    const openvdb::Vec3d vs = xform->voxelSize();
+    voxelLength = std::min({vs[0], vs[1], vs[2]});
+    const openvdb::BBoxd ib(active.min().asVec3d() - openvdb::Vec3d(0.5), active.max().asVec3d() + openvdb::Vec3d(0.5));
+    worldBox = xform->indexToWorld(ib);
 
     // Dense arrays over [min − 1, max + 2]: samples lie in [min − 1, max + 1] (where trilinear
     // support ends), and the +1 neighbour of the last one must exist.
@@ -386,127 +239,138 @@ HaloRaycaster::HaloRaycaster(const RenderVolume& vol, const RenderSettings& sett
         throw InputError("the active bounding box of '" + vol.density->getName() + "' (" + std::to_string(dim[0]) + "x" +
                          std::to_string(dim[1]) + "x" + std::to_string(dim[2]) +
                          " voxels) is too large for the reference raycaster (at most 2^31 voxels)");
-    m.nx = dim[0];
-    m.ny = dim[1];
-    m.nz = dim[2];
-    m.origin = dbox.min().asVec3d();
-    m.extent = openvdb::Vec3d(dim[0] - 2, dim[1] - 2, dim[2] - 2);
-    const std::size_t n = std::size_t(count);
+    nx = dim[0];
+    ny = dim[1];
+    nz = dim[2];
+    origin = dbox.min().asVec3d();
+    extent = openvdb::Vec3d(dim[0] - 2, dim[1] - 2, dim[2] - 2);
+    return dbox;
+}
 
-    {
-        const ThreadLimit threadLimit(settings.threads);
-        int stages = 1 + (vol.halo && settings.halos) + (vol.color || settings.colormap) + (vol.tangent || vol.flow);
-        progress.begin("load", std::uint64_t(stages));
-        m.density.assign(n, 0.0f);
-        fillDense(*vol.density, *m.xform, dbox, m.density.data());
-        if (m.settings.densityScale == 0.0 && vol.halo) {
-            m.settings.densityScale = kAutoLineScale; // a line bake: each line nearly opaque
-        } else if (m.settings.densityScale == 0.0) {
-            // Auto: the mean windowed density over the box times the mean box depth (voxels)
-            // gives the optical depth of an average ray; scale it to kAutoDepth. Summed per
-            // z slice, then slices in order: the same value for any thread count.
-            std::vector<double> slice(std::size_t(m.nz), 0.0);
-            const double lo = settings.densityLow, inv = 1.0 / (settings.densityHigh - settings.densityLow);
-            const std::size_t per = std::size_t(m.nx) * std::size_t(m.ny);
-            tbb::parallel_for(tbb::blocked_range<int>(0, m.nz), [&](const tbb::blocked_range<int>& r) {
-                for (int k = r.begin(); k != r.end(); ++k) {
-                    double acc = 0.0;
-                    for (std::size_t i = std::size_t(k) * per, e = i + per; i < e; ++i)
-                        acc += std::clamp((double(m.density[i]) - lo) * inv, 0.0, 1.0);
-                    slice[std::size_t(k)] = acc;
-                }
-            });
-            double sum = 0.0;
-            for (double v : slice) sum += v;
-            const double mean = sum / double(n);
-            const double depth = (active.dim()[0] + active.dim()[1] + active.dim()[2]) / 3.0;
-            const double k = mean > 0.0 ? kAutoDepth / (mean * depth) : 1.0;
-            m.settings.densityScale = std::clamp(k, 1e-3, 8.0);
-        }
+/// Fill the dense arrays over `dbox` (one progress unit per grid) and resolve an automatic
+/// density scale.
+void HaloRaycaster::Impl::load(const RenderVolume& vol, const openvdb::CoordBBox& dbox, const openvdb::Coord& activeDim,
+                               Progress& progress)
+{
+    const std::size_t n = std::size_t(nx) * std::size_t(ny) * std::size_t(nz);
+    int stages = 1 + (vol.halo && settings.halos) + (vol.color || settings.colormap) + (vol.tangent || vol.flow);
+    progress.begin("load", std::uint64_t(stages));
+    density.assign(n, 0.0f);
+    fillDense(*vol.density, *xform, dbox, density.data());
+    if (settings.densityScale == 0.0)
+        settings.densityScale = vol.halo ? kAutoLineScale : autoDensityScale(activeDim); // a line bake: each line nearly opaque
+    progress.advance(1);
+    detail::checkCancel(progress);
+    if (vol.halo && settings.halos) {
+        halo.assign(n, 0.0f);
+        fillDense(*vol.halo, *xform, dbox, halo.data());
+        useHalo = true;
         progress.advance(1);
-        detail::checkCancel(progress);
-        if (vol.halo && settings.halos) {
-            m.halo.assign(n, 0.0f);
-            fillDense(*vol.halo, *m.xform, dbox, m.halo.data());
-            m.useHalo = true;
-            progress.advance(1);
-        }
-        detail::checkCancel(progress);
-        if (settings.colormap) {
-            std::vector<float> s(n, 0.0f);
-            fillDense(*vol.scalar, *m.xform, dbox, s.data());
-            // A 1024-entry table of the map, scene-linear.
-            std::vector<openvdb::Vec3s> lut(1024);
-            for (int i = 0; i < 1024; ++i) {
-                const openvdb::Vec3d c = settings.colormap->linear(double(i) / 1023.0);
-                lut[std::size_t(i)] = openvdb::Vec3s(float(c[0]), float(c[1]), float(c[2]));
-            }
-            m.color.resize(n);
-            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 16), [&](const auto& r) {
-                for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                    const float v = std::clamp(s[i], 0.0f, 1.0f);
-                    m.color[i] = lut[std::size_t(std::lround(v * 1023.0f))];
-                }
-            });
-            progress.advance(1);
-        } else if (vol.color) {
-            m.color.assign(n, openvdb::Vec3s(0.0f));
-            fillDense(*vol.color, *m.xform, dbox, m.color.data());
-            progress.advance(1);
-        }
-        detail::checkCancel(progress);
-        if (vol.tangent || vol.flow) {
-            m.tangent.assign(n, openvdb::Vec3s(0.0f));
-            fillDense(vol.tangent ? *vol.tangent : *vol.flow, *m.xform, dbox, m.tangent.data());
-            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 16), [&](const auto& r) {
-                for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                    const float len = m.tangent[i].length();
-                    m.tangent[i] = len > 1e-20f ? m.tangent[i] / len : openvdb::Vec3s(0.0f);
-                }
-            });
-            progress.advance(1);
-        }
-        progress.end();
-
-        // Brick occupancy: brick b covers local samples [8b, 8b + 8) and reads voxels
-        // [8b, 8b + 8]. It can contribute if some voxel there is above the density window or,
-        // with halos, above the halo threshold (a halo exit must still be seen).
-        m.bx = int(std::floor(m.extent[0] / kBrick)) + 1;
-        m.by = int(std::floor(m.extent[1] / kBrick)) + 1;
-        m.bz = int(std::floor(m.extent[2] / kBrick)) + 1;
-        m.brickActive.assign(std::size_t(m.bx) * std::size_t(m.by) * std::size_t(m.bz), 0);
-        const float lo = float(settings.densityLow), thr = float(settings.haloThreshold);
-        tbb::parallel_for(tbb::blocked_range<int>(0, m.bz), [&](const tbb::blocked_range<int>& r) {
-            for (int c = r.begin(); c != r.end(); ++c)
-                for (int b = 0; b < m.by; ++b)
-                    for (int a = 0; a < m.bx; ++a) {
-                        bool on = false;
-                        for (int k = c * kBrick; k <= std::min(c * kBrick + kBrick, m.nz - 1) && !on; ++k)
-                            for (int j = b * kBrick; j <= std::min(b * kBrick + kBrick, m.ny - 1) && !on; ++j) {
-                                const std::size_t row = std::size_t(m.nx) * (std::size_t(j) + std::size_t(m.ny) * std::size_t(k));
-                                for (int i = a * kBrick; i <= std::min(a * kBrick + kBrick, m.nx - 1); ++i) {
-                                    if (m.density[row + std::size_t(i)] > lo ||
-                                        (m.useHalo && m.halo[row + std::size_t(i)] > thr)) {
-                                        on = true;
-                                        break;
-                                    }
-                                }
-                            }
-                        m.brickActive[std::size_t(a) + std::size_t(m.bx) * (std::size_t(b) + std::size_t(m.by) * std::size_t(c))] = on;
-                    }
-        });
-        m.haveTangent = !m.tangent.empty();
-        if (!m.settings.lighting.enabled) std::vector<openvdb::Vec3s>().swap(m.tangent); // unlit: not needed
-        if (!m.tangent.empty()) {
-            m.packed.resize(n);
-            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 16), [&](const auto& r) {
-                for (std::size_t i = r.begin(); i != r.end(); ++i)
-                    m.packed[i] = openvdb::Vec4f(m.density[i], m.tangent[i][0], m.tangent[i][1], m.tangent[i][2]);
-            });
-            std::vector<float>().swap(m.density);
-            std::vector<openvdb::Vec3s>().swap(m.tangent);
-        }
     }
+    detail::checkCancel(progress);
+    if (settings.colormap || vol.color) {
+        loadColor(vol, dbox);
+        progress.advance(1);
+    }
+    detail::checkCancel(progress);
+    if (vol.tangent || vol.flow) {
+        loadTangent(vol, dbox);
+        progress.advance(1);
+    }
+    progress.end();
+}
+
+/// The mean windowed density over the box times the mean box depth (voxels) gives the optical
+/// depth of an average ray; the scale makes it kAutoDepth. Summed per z slice, then slices in
+/// order: the same value for any thread count.
+double HaloRaycaster::Impl::autoDensityScale(const openvdb::Coord& activeDim) const
+{
+    std::vector<double> slice(std::size_t(nz), 0.0);
+    const double lo = settings.densityLow, inv = 1.0 / (settings.densityHigh - settings.densityLow);
+    const std::size_t per = std::size_t(nx) * std::size_t(ny);
+    tbb::parallel_for(tbb::blocked_range<int>(0, nz), [&](const tbb::blocked_range<int>& r) {
+        for (int k = r.begin(); k != r.end(); ++k) {
+            double acc = 0.0;
+            for (std::size_t i = std::size_t(k) * per, e = i + per; i < e; ++i)
+                acc += std::clamp((double(density[i]) - lo) * inv, 0.0, 1.0);
+            slice[std::size_t(k)] = acc;
+        }
+    });
+    double sum = 0.0;
+    for (double v : slice) sum += v;
+    const double mean = sum / double(density.size());
+    const double depth = (activeDim[0] + activeDim[1] + activeDim[2]) / 3.0;
+    const double k = mean > 0.0 ? kAutoDepth / (mean * depth) : 1.0;
+    return std::clamp(k, 1e-3, 8.0);
+}
+
+/// `color`: the colormap over the scalar grid (a 1024-entry table), else the colour grid.
+void HaloRaycaster::Impl::loadColor(const RenderVolume& vol, const openvdb::CoordBBox& dbox)
+{
+    const std::size_t n = density.size();
+    if (!settings.colormap) {
+        color.assign(n, openvdb::Vec3s(0.0f));
+        fillDense(*vol.color, *xform, dbox, color.data());
+        return;
+    }
+    std::vector<float> s(n, 0.0f);
+    fillDense(*vol.scalar, *xform, dbox, s.data());
+    const std::vector<openvdb::Vec3s> lut = colormapTable(*settings.colormap);
+    color.resize(n);
+    forEachVoxel(n, [&](std::size_t i) {
+        const float v = std::clamp(s[i], 0.0f, 1.0f);
+        color[i] = lut[std::size_t(std::lround(v * 1023.0f))];
+    });
+}
+
+/// `tangent`: the unit tangent grid's or flow field's direction (0 where it has none).
+void HaloRaycaster::Impl::loadTangent(const RenderVolume& vol, const openvdb::CoordBBox& dbox)
+{
+    tangent.assign(density.size(), openvdb::Vec3s(0.0f));
+    fillDense(vol.tangent ? *vol.tangent : *vol.flow, *xform, dbox, tangent.data());
+    forEachVoxel(tangent.size(), [&](std::size_t i) {
+        const float len = tangent[i].length();
+        tangent[i] = len > 1e-20f ? tangent[i] / len : openvdb::Vec3s(0.0f);
+    });
+}
+
+/// Brick occupancy: brick b covers local samples [8b, 8b + 8) and reads voxels [8b, 8b + 8]. It
+/// can contribute if some voxel there is above the density window or, with halos, above the halo
+/// threshold (a halo exit must still be seen).
+void HaloRaycaster::Impl::buildBrickTable()
+{
+    bx = int(std::floor(extent[0] / kBrick)) + 1;
+    by = int(std::floor(extent[1] / kBrick)) + 1;
+    bz = int(std::floor(extent[2] / kBrick)) + 1;
+    brickActive.assign(std::size_t(bx) * std::size_t(by) * std::size_t(bz), 0);
+    const float lo = float(settings.densityLow), thr = float(settings.haloThreshold);
+    auto contributes = [&](int a, int b, int c) {
+        for (int k = c * kBrick; k <= std::min(c * kBrick + kBrick, nz - 1); ++k)
+            for (int j = b * kBrick; j <= std::min(b * kBrick + kBrick, ny - 1); ++j) {
+                const std::size_t row = std::size_t(nx) * (std::size_t(j) + std::size_t(ny) * std::size_t(k));
+                for (int i = a * kBrick; i <= std::min(a * kBrick + kBrick, nx - 1); ++i)
+                    if (density[row + std::size_t(i)] > lo || (useHalo && halo[row + std::size_t(i)] > thr)) return true;
+            }
+        return false;
+    };
+    tbb::parallel_for(tbb::blocked_range<int>(0, bz), [&](const tbb::blocked_range<int>& r) {
+        for (int c = r.begin(); c != r.end(); ++c)
+            for (int b = 0; b < by; ++b)
+                for (int a = 0; a < bx; ++a)
+                    brickActive[std::size_t(a) + std::size_t(bx) * (std::size_t(b) + std::size_t(by) * std::size_t(c))] =
+                        contributes(a, b, c);
+    });
+}
+
+/// Density and tangent into `packed`; both are released.
+void HaloRaycaster::Impl::packDensityAndTangent()
+{
+    packed.resize(density.size());
+    forEachVoxel(packed.size(), [&](std::size_t i) {
+        packed[i] = openvdb::Vec4f(density[i], tangent[i][0], tangent[i][1], tangent[i][2]);
+    });
+    std::vector<float>().swap(density);
+    std::vector<openvdb::Vec3s>().swap(tangent);
 }
 
 HaloRaycaster::~HaloRaycaster() = default;
@@ -550,7 +414,241 @@ inline float specPow(float x, float n, int ni)
     return r;
 }
 
+/// A 3D DDA over the 8³ bricks a ray q(t) = q0 + t·qd (local index space) crosses (Amanatides &
+/// Woo), from the brick of q(t0).
+class BrickWalk
+{
+public:
+    [[gnu::always_inline]] BrickWalk(const openvdb::Vec3d& q0, const openvdb::Vec3d& qd, double t0, int bx, int by,
+                                     int bz)
+        : mCount{bx, by, bz}
+    {
+        const openvdb::Vec3d qs = q0 + qd * t0;
+        for (int a = 0; a < 3; ++a) {
+            mCell[a] = std::clamp(int(std::floor(qs[a] / kBrick)), 0, mCount[a] - 1);
+            if (qd[a] > 1e-15) {
+                mStep[a] = 1;
+                mNext[a] = ((mCell[a] + 1) * double(kBrick) - q0[a]) / qd[a];
+                mDelta[a] = kBrick / qd[a];
+            } else if (qd[a] < -1e-15) {
+                mStep[a] = -1;
+                mNext[a] = (mCell[a] * double(kBrick) - q0[a]) / qd[a];
+                mDelta[a] = -kBrick / qd[a];
+            } else {
+                mStep[a] = 0;
+                mNext[a] = mDelta[a] = std::numeric_limits<double>::infinity();
+            }
+        }
+    }
+
+    /// Where the ray leaves the current brick (at most `t1`).
+    double exit(double t1) const { return std::min({mNext[0], mNext[1], mNext[2], t1}); }
+    /// The current brick's index in the occupancy table (x fastest).
+    std::size_t brick() const
+    {
+        return std::size_t(mCell[0]) +
+               std::size_t(mCount[0]) * (std::size_t(mCell[1]) + std::size_t(mCount[1]) * std::size_t(mCell[2]));
+    }
+    /// Step into the next brick, whose entry parameter goes to `entry`; false when the ray leaves
+    /// the grid of bricks.
+    [[gnu::always_inline]] bool next(double& entry)
+    {
+        int a = 0;
+        if (mNext[1] < mNext[a]) a = 1;
+        if (mNext[2] < mNext[a]) a = 2;
+        mCell[a] += mStep[a];
+        if (mCell[a] < 0 || mCell[a] >= mCount[a]) return false;
+        entry = mNext[a];
+        mNext[a] += mDelta[a];
+        return true;
+    }
+
+private:
+    int mCount[3], mCell[3], mStep[3];
+    double mNext[3], mDelta[3];
+};
+
 } // namespace
+
+/// The samples of a ray at parameters t0 + (k + ½)·dt (world units along the ray), k in
+/// [0, kEnd): those before t1.
+struct HaloRaycaster::Impl::Samples
+{
+    double t0, t1, dt;
+    std::int64_t kEnd;
+
+    Samples(double first, double last, double spacing)
+        : t0(first), t1(last), dt(spacing), kEnd(std::int64_t(std::ceil((last - first) / spacing - 0.5)))
+    {
+    }
+    double t(std::int64_t k) const { return t0 + (double(k) + 0.5) * dt; }
+    /// The first sample at or after parameter `t`.
+    std::int64_t firstFrom(double t) const { return std::int64_t(std::ceil((t - t0) / dt - 0.5)); }
+};
+
+/// One ray marched front to back: the transfer function's constants, what the ray has gathered
+/// (colour, transmittance, the halo it is in), and its samples one at a time. The configuration is
+/// template arguments, so a sample does not branch on it.
+template<bool Lit, bool Halo, bool Colored>
+class HaloRaycaster::Impl::Marcher
+{
+public:
+    /// `rayDir` is the ray's unit world direction; `lightDir` the unit direction towards the light.
+    Marcher(const Impl& impl, const openvdb::Vec3d& q0, const openvdb::Vec3d& qd, const openvdb::Vec3d& rayDir,
+            const openvdb::Vec3d& lightDir, bool headlight, RenderStats& stats)
+        : mImpl(impl), mSettings(impl.settings), mQ0(q0), mQd(qd), mStats(stats),
+          mTau(mSettings.densityScale * mSettings.step), mLo(float(mSettings.densityLow)),
+          mInvWindow(float(1.0 / (mSettings.densityHigh - mSettings.densityLow))), mThreshold(float(mSettings.haloThreshold)),
+          mView(-rayDir), mLight(headlight ? mView : openvdb::Vec3f(lightDir)),
+          mAmbient(float(mSettings.lighting.ambient)), mDiffuse(float(mSettings.lighting.diffuse)),
+          mSpecular(float(mSettings.lighting.specular)), mShininess(float(mSettings.lighting.shininess)),
+          mShininessInt((mShininess == std::floor(mShininess) && mShininess <= 256.0f) ? int(mShininess) : -1),
+          mDensity(Lit ? nullptr : impl.density.data()), mPacked(Lit ? impl.packed.data() : nullptr),
+          mSy(std::size_t(impl.nx)), mSz(std::size_t(impl.nx) * std::size_t(impl.ny))
+    {
+    }
+
+    /// Take the sample at parameter `t`; false once the ray is opaque (finished).
+    [[gnu::always_inline]] bool sample(double t)
+    {
+        ++mStats.samples;
+        const Corners c = corners(mQ0 + mQd * t);
+        if constexpr (Halo) trackHalo(c);
+        float rho = 0.0f;
+        openvdb::Vec4f dtan(0.0f);
+        if constexpr (Lit) {
+            for (int k = 0; k < 8; ++k) dtan += mPacked[c.idx[k]] * c.w[k];
+            rho = dtan[0];
+        } else {
+            for (int k = 0; k < 8; ++k) rho += c.w[k] * mDensity[c.idx[k]];
+        }
+        if (!(rho > mLo)) return true;
+        const float rw = std::min(1.0f, (rho - mLo) * mInvWindow);
+        const double alpha = 1.0 - double(std::exp(-float(mTau) * rw));
+        const double weight = mT * alpha * mSettings.brightness;
+        if (weight > 1e-9) emit(weight, rho, c, dtan);
+        mT *= 1.0 - alpha;
+        return !(mT < mSettings.minTransmittance);
+    }
+
+    /// An empty brick was skipped: a halo the ray was in ends there.
+    void leaveHalo()
+    {
+        if (mInHalo) haloExit();
+    }
+
+    /// The pixel: premultiplied RGB and alpha.
+    void write(float* px) const
+    {
+        px[0] = float(mR);
+        px[1] = float(mG);
+        px[2] = float(mB);
+        px[3] = float(1.0 - mT);
+    }
+
+private:
+    /// The 8 voxels around a local point and their trilinear weights.
+    struct Corners
+    {
+        float w[8];
+        std::size_t idx[8];
+    };
+
+    [[gnu::always_inline]] Corners corners(const openvdb::Vec3d& q) const
+    {
+        const double fx0 = std::floor(q[0]), fy0 = std::floor(q[1]), fz0 = std::floor(q[2]);
+        int ix = int(fx0), iy = int(fy0), iz = int(fz0);
+        ix = std::clamp(ix, 0, mImpl.nx - 2);
+        iy = std::clamp(iy, 0, mImpl.ny - 2);
+        iz = std::clamp(iz, 0, mImpl.nz - 2);
+        const float fx = float(std::clamp(q[0] - ix, 0.0, 1.0));
+        const float fy = float(std::clamp(q[1] - iy, 0.0, 1.0));
+        const float fz = float(std::clamp(q[2] - iz, 0.0, 1.0));
+        const std::size_t i000 = std::size_t(ix) + mSy * std::size_t(iy) + mSz * std::size_t(iz);
+        return {{(1 - fx) * (1 - fy) * (1 - fz), fx * (1 - fy) * (1 - fz), (1 - fx) * fy * (1 - fz), fx * fy * (1 - fz),
+                 (1 - fx) * (1 - fy) * fz, fx * (1 - fy) * fz, (1 - fx) * fy * fz, fx * fy * fz},
+                {i000, i000 + 1, i000 + mSy, i000 + mSy + 1, i000 + mSz, i000 + mSz + 1, i000 + mSz + mSy,
+                 i000 + mSz + mSy + 1}};
+    }
+
+    /// Enter, stay in or leave a halo by the halo value at the sample.
+    [[gnu::always_inline]] void trackHalo(const Corners& c)
+    {
+        float h = 0.0f;
+        for (int k = 0; k < 8; ++k) h += c.w[k] * mImpl.halo[c.idx[k]];
+        if (h > mThreshold) {
+            if (!mInHalo) {
+                mInHalo = true;
+                mHaloMax = h;
+            } else {
+                mHaloMax = std::max(mHaloMax, h);
+            }
+        } else if (mInHalo) {
+            haloExit();
+        }
+    }
+
+    /// At a halo exit the opacity so far is raised by haloStrength × the halo's maximum.
+    void haloExit()
+    {
+        mInHalo = false;
+        const double A = std::min(1.0, (1.0 - mT) + mSettings.haloStrength * double(mHaloMax));
+        mT = 1.0 - A;
+    }
+
+    /// Add the light of a sample of (positive) `weight`: colour, lit when Lit.
+    [[gnu::always_inline]] void emit(double weight, float rho, const Corners& corner, const openvdb::Vec4f& dtan)
+    {
+        openvdb::Vec3f c(1.0f);
+        if constexpr (Colored) {
+            // Density-weighted: colour belongs to the lines, so voxels without density
+            // (outside the colour grid's active region: black) do not darken line edges.
+            openvdb::Vec3f cs(0.0f);
+            for (int k = 0; k < 8; ++k) {
+                const float dk = Lit ? mPacked[corner.idx[k]][0] : mDensity[corner.idx[k]];
+                cs += mImpl.color[corner.idx[k]] * (corner.w[k] * dk);
+            }
+            c = cs / rho;
+        }
+        float spec = 0.0f;
+        if constexpr (Lit) c *= lineLight(openvdb::Vec3f(dtan[1], dtan[2], dtan[3]), spec);
+        mR += weight * (c[0] + spec);
+        mG += weight * (c[1] + spec);
+        mB += weight * (c[2] + spec);
+    }
+
+    /// Zöckler et al.: the diffuse factor √(1−(L·T)²) (with ambient) of a line of tangent `ts`
+    /// (any length), and its specular term into `spec`, from V·R = √(1−(L·T)²)·√(1−(V·T)²) − (L·T)(V·T).
+    [[gnu::always_inline]] float lineLight(const openvdb::Vec3f& ts, float& spec) const
+    {
+        const float len2 = ts.lengthSqr();
+        if (!(len2 > 1e-12f)) return mAmbient + mDiffuse;
+        const float inv = 1.0f / std::sqrt(len2);
+        const float lt = mLight.dot(ts) * inv, vt = mView.dot(ts) * inv;
+        // √(1 − (L·T)²) = |L × T| for unit vectors, accurate near parallel.
+        const float sl = mLight.cross(ts).length() * inv;
+        const float sv = mView.cross(ts).length() * inv;
+        const float vr = sl * sv - lt * vt;
+        spec = vr > 0.0f ? mSpecular * specPow(vr, mShininess, mShininessInt) : 0.0f;
+        return mAmbient + mDiffuse * sl;
+    }
+
+    const Impl& mImpl;
+    const RenderSettings& mSettings;
+    const openvdb::Vec3d mQ0, mQd; ///< the ray in local index space: q(t) = q0 + t·qd
+    RenderStats& mStats;
+    const double mTau; ///< optical depth per step at windowed density 1
+    const float mLo, mInvWindow, mThreshold;
+    const openvdb::Vec3f mView, mLight; ///< unit directions towards the eye and the light
+    const float mAmbient, mDiffuse, mSpecular, mShininess;
+    const int mShininessInt;
+    const float* const mDensity;
+    const openvdb::Vec4f* const mPacked;
+    const std::size_t mSy, mSz; ///< voxel strides of y and z
+    double mT = 1.0, mR = 0.0, mG = 0.0, mB = 0.0; ///< transmittance and gathered light
+    bool mInHalo = false;
+    float mHaloMax = 0.0f;
+};
 
 template<bool Lit, bool Halo, bool Colored>
 void HaloRaycaster::Impl::march(const openvdb::math::Ray<double>& ray, float* px, RenderStats& st,
@@ -562,7 +660,7 @@ void HaloRaycaster::Impl::march(const openvdb::math::Ray<double>& ray, float* px
     const openvdb::Vec3d q0 = worldToIndex.transform(ray.eye()) - origin;
     const openvdb::Vec3d qd = worldToIndex.transform3x3(ray.dir());
     double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
-    for (int a = 0; a < 3; ++a) {
+    for (int a = 0; a < 3; ++a) { // clip to the sample box [0, extent]
         if (std::abs(qd[a]) < 1e-15) {
             if (q0[a] < 0.0 || q0[a] > extent[a]) return;
             continue;
@@ -574,176 +672,41 @@ void HaloRaycaster::Impl::march(const openvdb::math::Ray<double>& ray, float* px
     }
     if (!(t0 < t1)) return;
 
-    const RenderSettings& s = settings;
-    const double dt = s.step * voxelLength; // world units per step
-    const double tau = s.densityScale * s.step;  // optical depth per step at ρ' = 1
-    const float lo = float(s.densityLow);
-    const float invWindow = float(1.0 / (s.densityHigh - s.densityLow));
-    const float thr = float(s.haloThreshold);
-    const openvdb::Vec3f v(-ray.dir());
-    const openvdb::Vec3f l = headlight ? v : openvdb::Vec3f(lightDir);
-    const float ka = float(s.lighting.ambient), kd = float(s.lighting.diffuse), ks = float(s.lighting.specular);
-    const float shin = float(s.lighting.shininess);
-    const int shinInt = (shin == std::floor(shin) && shin <= 256.0f) ? int(shin) : -1;
-    const float* dens = Lit ? nullptr : density.data();
-    const openvdb::Vec4f* pk = Lit ? packed.data() : nullptr;
-    const std::size_t sy = std::size_t(nx), sz = std::size_t(nx) * std::size_t(ny);
-
-    double T = 1.0, R = 0.0, G = 0.0, B = 0.0;
-    bool inHalo = false;
-    float haloMax = 0.0f;
-    auto haloExit = [&] {
-        inHalo = false;
-        const double A = std::min(1.0, (1.0 - T) + s.haloStrength * double(haloMax));
-        T = 1.0 - A;
-    };
-
-    // One sample at parameter t. Returns false when the ray is finished (opaque).
-    auto sample = [&](double t) __attribute__((always_inline)) -> bool {
-        ++st.samples;
-        const openvdb::Vec3d q = q0 + qd * t;
-        const double fx0 = std::floor(q[0]), fy0 = std::floor(q[1]), fz0 = std::floor(q[2]);
-        int ix = int(fx0), iy = int(fy0), iz = int(fz0);
-        ix = std::clamp(ix, 0, nx - 2);
-        iy = std::clamp(iy, 0, ny - 2);
-        iz = std::clamp(iz, 0, nz - 2);
-        const float fx = float(std::clamp(q[0] - ix, 0.0, 1.0));
-        const float fy = float(std::clamp(q[1] - iy, 0.0, 1.0));
-        const float fz = float(std::clamp(q[2] - iz, 0.0, 1.0));
-        const std::size_t i000 = std::size_t(ix) + sy * std::size_t(iy) + sz * std::size_t(iz);
-        const float w[8] = {(1 - fx) * (1 - fy) * (1 - fz), fx * (1 - fy) * (1 - fz), (1 - fx) * fy * (1 - fz),
-                            fx * fy * (1 - fz), (1 - fx) * (1 - fy) * fz, fx * (1 - fy) * fz,
-                            (1 - fx) * fy * fz, fx * fy * fz};
-        const std::size_t idx[8] = {i000, i000 + 1, i000 + sy, i000 + sy + 1,
-                                    i000 + sz, i000 + sz + 1, i000 + sz + sy, i000 + sz + sy + 1};
-        if constexpr (Halo) {
-            float h = 0.0f;
-            for (int c = 0; c < 8; ++c) h += w[c] * halo[idx[c]];
-            if (h > thr) {
-                if (!inHalo) {
-                    inHalo = true;
-                    haloMax = h;
-                } else {
-                    haloMax = std::max(haloMax, h);
-                }
-            } else if (inHalo) {
-                haloExit();
-            }
-        }
-        float rho = 0.0f;
-        openvdb::Vec4f dtan(0.0f);
-        if constexpr (Lit) {
-            for (int c = 0; c < 8; ++c) dtan += pk[idx[c]] * w[c];
-            rho = dtan[0];
-        } else {
-            for (int c = 0; c < 8; ++c) rho += w[c] * dens[idx[c]];
-        }
-        if (rho > lo) {
-            const float rw = std::min(1.0f, (rho - lo) * invWindow);
-            const double alpha = 1.0 - double(std::exp(-float(tau) * rw));
-            const double weight = T * alpha * s.brightness;
-            if (weight > 1e-9) {
-                openvdb::Vec3f c(1.0f);
-                if constexpr (Colored) {
-                    // Density-weighted: colour belongs to the lines, so voxels without density
-                    // (outside the colour grid's active region: black) do not darken line edges.
-                    openvdb::Vec3f cs(0.0f);
-                    for (int k = 0; k < 8; ++k) {
-                        const float dk = Lit ? pk[idx[k]][0] : dens[idx[k]];
-                        cs += color[idx[k]] * (w[k] * dk);
-                    }
-                    c = cs / rho;
-                }
-                float spec = 0.0f;
-                if constexpr (Lit) {
-                    // Zöckler et al.: diffuse √(1−(L·T)²), V·R = √(1−(L·T)²)·√(1−(V·T)²) − (L·T)(V·T).
-                    const openvdb::Vec3f ts(dtan[1], dtan[2], dtan[3]);
-                    const float len2 = ts.lengthSqr();
-                    float diff = ka + kd;
-                    if (len2 > 1e-12f) {
-                        const float inv = 1.0f / std::sqrt(len2);
-                        const float lt = l.dot(ts) * inv, vt = v.dot(ts) * inv;
-                        // √(1 − (L·T)²) = |L × T| for unit vectors, accurate near parallel.
-                        const float sl = l.cross(ts).length() * inv;
-                        const float sv = v.cross(ts).length() * inv;
-                        const float vr = sl * sv - lt * vt;
-                        diff = ka + kd * sl;
-                        spec = vr > 0.0f ? ks * specPow(vr, shin, shinInt) : 0.0f;
-                    }
-                    c *= diff;
-                }
-                R += weight * (c[0] + spec);
-                G += weight * (c[1] + spec);
-                B += weight * (c[2] + spec);
-            }
-            T *= 1.0 - alpha;
-            if (T < s.minTransmittance) return false;
-        }
-        return true;
-    };
-
-    const double span = t1 - t0;
-    const std::int64_t kEnd = std::int64_t(std::ceil(span / dt - 0.5)); // samples k with t0 + (k+½)dt < t1
-    auto tk = [&](std::int64_t k) { return t0 + (double(k) + 0.5) * dt; };
-
-    if (!s.emptySpaceSkipping) {
-        for (std::int64_t k = 0; k < kEnd; ++k)
-            if (tk(k) < t1 && !sample(tk(k))) break;
+    const Samples samples(t0, t1, settings.step * voxelLength);
+    Marcher<Lit, Halo, Colored> marcher(*this, q0, qd, ray.dir(), lightDir, headlight, st);
+    if (settings.emptySpaceSkipping) {
+        marchBricks(marcher, samples, q0, qd, st);
     } else {
-        // 3D DDA over 8³ bricks (Amanatides & Woo).
-        const openvdb::Vec3d qs = q0 + qd * t0;
-        int cell[3], stepc[3], nb[3] = {bx, by, bz};
-        double tNext[3], tDelta[3];
-        for (int a = 0; a < 3; ++a) {
-            cell[a] = std::clamp(int(std::floor(qs[a] / kBrick)), 0, nb[a] - 1);
-            if (qd[a] > 1e-15) {
-                stepc[a] = 1;
-                tNext[a] = ((cell[a] + 1) * double(kBrick) - q0[a]) / qd[a];
-                tDelta[a] = kBrick / qd[a];
-            } else if (qd[a] < -1e-15) {
-                stepc[a] = -1;
-                tNext[a] = (cell[a] * double(kBrick) - q0[a]) / qd[a];
-                tDelta[a] = -kBrick / qd[a];
-            } else {
-                stepc[a] = 0;
-                tNext[a] = tDelta[a] = std::numeric_limits<double>::infinity();
-            }
-        }
-        std::int64_t k = 0;
-        double tc = t0;
-        bool prevActive = true;
-        while (true) {
-            const double tExit = std::min({tNext[0], tNext[1], tNext[2], t1});
-            const bool on = brickActive[std::size_t(cell[0]) +
-                                        std::size_t(bx) * (std::size_t(cell[1]) + std::size_t(by) * std::size_t(cell[2]))];
-            if (on) {
-                if (!prevActive) k = std::max(k, std::int64_t(std::ceil((tc - t0) / dt - 0.5)));
-                bool alive = true;
-                for (; k < kEnd && tk(k) < tExit; ++k)
-                    if (!sample(tk(k))) {
-                        alive = false;
-                        break;
-                    }
-                if (!alive) break;
-            } else {
-                ++st.skippedBricks;
-                if (inHalo) haloExit();
-            }
-            prevActive = on;
-            if (tExit >= t1 || k >= kEnd) break;
-            int a = 0;
-            if (tNext[1] < tNext[a]) a = 1;
-            if (tNext[2] < tNext[a]) a = 2;
-            cell[a] += stepc[a];
-            if (cell[a] < 0 || cell[a] >= nb[a]) break;
-            tc = tNext[a];
-            tNext[a] += tDelta[a];
-        }
+        for (std::int64_t k = 0; k < samples.kEnd; ++k)
+            if (samples.t(k) < t1 && !marcher.sample(samples.t(k))) break;
     }
-    px[0] = float(R);
-    px[1] = float(G);
-    px[2] = float(B);
-    px[3] = float(1.0 - T);
+    marcher.write(px);
+}
+
+/// March the samples that lie in bricks that can contribute, skipping the others.
+template<class M>
+void HaloRaycaster::Impl::marchBricks(M& marcher, const Samples& samples, const openvdb::Vec3d& q0,
+                                      const openvdb::Vec3d& qd, RenderStats& st) const
+{
+    BrickWalk walk(q0, qd, samples.t0, bx, by, bz);
+    std::int64_t k = 0;
+    double entry = samples.t0;
+    bool prevActive = true;
+    while (true) {
+        const double tExit = walk.exit(samples.t1);
+        const bool on = brickActive[walk.brick()];
+        if (on) {
+            if (!prevActive) k = std::max(k, samples.firstFrom(entry));
+            for (; k < samples.kEnd && samples.t(k) < tExit; ++k)
+                if (!marcher.sample(samples.t(k))) return;
+        } else {
+            ++st.skippedBricks;
+            marcher.leaveHalo();
+        }
+        prevActive = on;
+        if (tExit >= samples.t1 || k >= samples.kEnd) return;
+        if (!walk.next(entry)) return;
+    }
 }
 
 void HaloRaycaster::Impl::renderTile(const Camera& cam, Image& img, int x0, int y0, int x1, int y1,

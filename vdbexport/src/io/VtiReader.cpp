@@ -80,20 +80,31 @@ std::optional<Tag> nextTag(std::string_view s, std::size_t pos, const std::strin
     }
 }
 
-std::vector<double> numbers(const std::string& text, std::size_t expected, const std::string& what, const std::string& source)
+/// Call `f(v)` for each whitespace-separated number v of `text`, in order, until `f` returns false.
+/// @return false at a word that is not a number.
+template<class F>
+bool forEachNumber(const char* p, F&& f)
 {
-    std::vector<double> out;
-    const char* p = text.c_str();
     char* end = nullptr;
     while (true) {
         while (*p && std::isspace(static_cast<unsigned char>(*p))) ++p;
-        if (!*p) break;
+        if (!*p) return true;
         const double v = std::strtod(p, &end);
-        if (end == p) inputError(source, what + " '" + text.substr(0, 60) + "' is not a list of numbers");
-        out.push_back(v);
-        if (out.size() > expected) break;
+        if (end == p) return false;
+        if (!f(v)) return true;
         p = end;
     }
+}
+
+/// Exactly `expected` numbers of attribute `what`.
+std::vector<double> numbers(const std::string& text, std::size_t expected, const std::string& what, const std::string& source)
+{
+    std::vector<double> out;
+    const bool numeric = forEachNumber(text.c_str(), [&](double v) {
+        out.push_back(v);
+        return out.size() <= expected;
+    });
+    if (!numeric) inputError(source, what + " '" + text.substr(0, 60) + "' is not a list of numbers");
     if (out.size() != expected)
         inputError(source, what + " '" + text.substr(0, 60) + "' needs " + std::to_string(expected) + " numbers");
     return out;
@@ -244,176 +255,236 @@ void finishGeometry(DenseImage& img, const std::array<std::int64_t, 6>& ext, boo
     }
 }
 
-} // namespace
-
-DenseImage parseVti(std::string_view s, const std::string& source)
+/// The binary layout a <VTKFile> element declares (byte order, header word size, compressor).
+BinaryFormat binaryFormat(const Tag& file, const std::string& source)
 {
-    auto t = nextTag(s, 0, source);
-    if (!t || t->name != "VTKFile") inputError(source, "not a VTK XML file (no <VTKFile> element); expected a .vti file");
-    if (t->attrs.count("type") && t->attrs["type"] != "ImageData")
-        inputError(source, "VTK XML type '" + t->attrs["type"] + "' is not supported; expected ImageData");
+    auto attr = [&](const char* name) {
+        const auto it = file.attrs.find(name);
+        return it == file.attrs.end() ? std::optional<std::string>() : it->second;
+    };
+    if (attr("type") && *attr("type") != "ImageData")
+        inputError(source, "VTK XML type '" + *attr("type") + "' is not supported; expected ImageData");
     BinaryFormat bf;
-    bf.bigEndian = t->attrs.count("byte_order") && t->attrs["byte_order"] == "BigEndian";
-    if (t->attrs.count("header_type")) {
-        if (t->attrs["header_type"] == "UInt64") bf.headerUInt64 = true;
-        else if (t->attrs["header_type"] != "UInt32")
-            inputError(source, "header_type '" + t->attrs["header_type"] + "' is not supported; expected UInt32 or UInt64");
+    bf.bigEndian = attr("byte_order") == "BigEndian";
+    if (const auto header = attr("header_type")) {
+        if (*header == "UInt64") bf.headerUInt64 = true;
+        else if (*header != "UInt32")
+            inputError(source, "header_type '" + *header + "' is not supported; expected UInt32 or UInt64");
     }
-    if (t->attrs.count("compressor") && !t->attrs["compressor"].empty()) {
-        if (t->attrs["compressor"] != "vtkZLibDataCompressor")
-            inputError(source, "compressor '" + t->attrs["compressor"] + "' is not supported; expected vtkZLibDataCompressor or none");
+    if (const auto compressor = attr("compressor"); compressor && !compressor->empty()) {
+        if (*compressor != "vtkZLibDataCompressor")
+            inputError(source, "compressor '" + *compressor + "' is not supported; expected vtkZLibDataCompressor or none");
         bf.zlib = true;
     }
+    return bf;
+}
 
-    DenseImage img;
-    img.hasGeometry = true;
-    std::array<std::int64_t, 6> ext{};
-    bool haveExtent = false, inPiece = false, cells = false, sawData = false;
-    int pieces = 0;
-    struct Pending { std::string name; int comps; Elem e; std::uint64_t offset; };
-    std::vector<Pending> appended;
-    std::string appendedEncoding;
-    std::size_t appendedStart = std::string_view::npos;
-    std::size_t pos = t->end;
-    while (auto tag = nextTag(s, pos, source)) {
-        pos = tag->end;
-        if (tag->name == "ImageData") {
-            const auto& a = tag->attrs;
-            if (!a.count("WholeExtent")) inputError(source, "<ImageData> has no WholeExtent");
-            const auto e = numbers(a.at("WholeExtent"), 6, "WholeExtent", source);
-            for (int i = 0; i < 6; ++i) {
-                if (std::fabs(e[i]) > 1e12 || e[i] != std::floor(e[i])) inputError(source, "WholeExtent has a non-integer or huge value");
-                ext[i] = std::int64_t(e[i]);
-            }
-            haveExtent = true;
-            if (a.count("Origin")) {
-                const auto o = numbers(a.at("Origin"), 3, "Origin", source);
-                img.origin = openvdb::Vec3d(o[0], o[1], o[2]);
-            }
-            if (a.count("Spacing")) {
-                const auto sp = numbers(a.at("Spacing"), 3, "Spacing", source);
-                img.spacing = openvdb::Vec3d(sp[0], sp[1], sp[2]);
-            }
-            if (a.count("Direction")) {
-                const auto d = numbers(a.at("Direction"), 9, "Direction", source);
-                const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-                for (int i = 0; i < 9; ++i)
-                    if (std::fabs(d[i] - id[i]) > 1e-9) inputError(source, "a rotated ImageData (Direction not identity) is not supported");
-            }
-        } else if (tag->name == "Piece") {
-            if (++pieces > 1) inputError(source, "several <Piece> elements; expected one piece (merge the pieces first)");
-            inPiece = true;
-            if (tag->attrs.count("Extent")) {
-                const auto e = numbers(tag->attrs.at("Extent"), 6, "Extent", source);
-                for (int i = 0; i < 6; ++i)
-                    if (double(ext[i]) != e[i]) inputError(source, "piece Extent differs from WholeExtent; expected one whole piece");
-            }
-        } else if (tag->name == "PointData" || tag->name == "CellData") {
-            if (!haveExtent) inputError(source, "<" + tag->name + "> before <ImageData WholeExtent=...>");
-            if (sawData && cells != (tag->name == "CellData")) {
-                // Arrays of the other kind: keep the first kind only.
-                std::size_t close = s.find("</" + tag->name + ">", pos);
-                if (close == std::string_view::npos) inputError(source, "unterminated <" + tag->name + ">");
-                pos = close;
-                continue;
-            }
-            if (!sawData) {
-                cells = tag->name == "CellData";
-                sawData = true;
-                finishGeometry(img, ext, cells, source);
-            }
-        } else if (tag->name == "DataArray") {
-            if (!sawData || !inPiece) inputError(source, "<DataArray> outside <PointData>/<CellData> of a <Piece>");
-            const auto& a = tag->attrs;
-            const std::string name = a.count("Name") ? a.at("Name") : "array" + std::to_string(img.arrays.size());
-            const Elem e = vtkType(a.count("type") ? a.at("type") : "", source);
-            int comps = 1;
-            if (a.count("NumberOfComponents")) {
-                comps = std::atoi(a.at("NumberOfComponents").c_str());
-                if (comps != 1 && comps != 3)
-                    inputError(source, "DataArray " + q(name) + " has " + a.at("NumberOfComponents") + " components; expected 1 or 3");
-            }
-            const std::uint64_t values = img.voxelCount() * std::uint64_t(comps);
-            const std::uint64_t need = values * elemSize(e);
-            const std::string format = a.count("format") ? a.at("format") : "ascii";
-            std::size_t close = tag->selfClosing ? pos : s.find("</DataArray>", pos);
-            if (close == std::string_view::npos) inputError(source, "unterminated <DataArray> " + q(name));
-            const std::string_view body = s.substr(pos, close - pos);
-            if (format == "ascii") {
-                if (values > body.size() / 2 + 1)
-                    inputError(source, "DataArray " + q(name) + " has too few values for the extent (" + std::to_string(values)
-                                           + " needed; mismatched shape)");
-                DenseImage::Array arr;
-                arr.name = name;
-                arr.components = comps;
-                arr.data.reserve(values);
-                std::string text(body);
-                const char* p = text.c_str();
-                char* end = nullptr;
-                while (true) {
-                    while (*p && std::isspace(static_cast<unsigned char>(*p))) ++p;
-                    if (!*p) break;
-                    const double v = std::strtod(p, &end);
-                    if (end == p) inputError(source, "DataArray " + q(name) + " has a value that is not a number");
-                    if (arr.data.size() == values)
-                        inputError(source, "DataArray " + q(name) + " has more values than the extent needs ("
-                                               + std::to_string(values) + "; mismatched shape)");
-                    arr.data.push_back(float(v));
-                    p = end;
-                }
-                if (arr.data.size() != values)
-                    inputError(source, "DataArray " + q(name) + " has " + std::to_string(arr.data.size()) + " values; the extent needs "
-                                           + std::to_string(values) + " (mismatched shape)");
-                img.arrays.push_back(std::move(arr));
-            } else if (format == "binary") {
-                const std::string raw = base64Decode(body, source);
-                storeArray(img, name, comps, decodeBlocks(raw, bf, need, source), e, bf.bigEndian);
-            } else if (format == "appended") {
-                if (!a.count("offset")) inputError(source, "appended DataArray " + q(name) + " has no offset");
-                char* end = nullptr;
-                const unsigned long long off = std::strtoull(a.at("offset").c_str(), &end, 10);
-                appended.push_back({name, comps, e, off});
-            } else {
-                inputError(source, "DataArray " + q(name) + " has format '" + format + "'; expected ascii, binary or appended");
-            }
-            pos = tag->selfClosing ? pos : close;
-        } else if (tag->name == "AppendedData") {
-            appendedEncoding = tag->attrs.count("encoding") ? tag->attrs.at("encoding") : "raw";
-            const std::size_t us = s.find('_', tag->end);
-            if (us == std::string_view::npos) inputError(source, "<AppendedData> has no '_' marker");
-            appendedStart = us + 1;
+/// One pass over the tags of a .vti file, filling a DenseImage.
+class VtiParser
+{
+public:
+    VtiParser(std::string_view s, const std::string& source) : mS(s), mSource(source) { mImg.hasGeometry = true; }
+
+    DenseImage parse();
+
+private:
+    /// An appended DataArray: its bytes are in <AppendedData> at `offset`.
+    struct Pending
+    {
+        std::string name;
+        int comps;
+        Elem e;
+        std::uint64_t offset;
+    };
+
+    void readImageData(const Tag& tag);
+    void readPiece(const Tag& tag);
+    void readDataSection(const Tag& tag);
+    void readDataArray(const Tag& tag);
+    void readAsciiArray(const std::string& name, int comps, std::uint64_t values, std::string_view body);
+    void readAppendedArrays();
+    std::vector<double> attrNumbers(const Tag& tag, const char* name, std::size_t count) const
+    {
+        return numbers(tag.attrs.at(name), count, name, mSource);
+    }
+
+    std::string_view mS;
+    const std::string& mSource;
+    BinaryFormat mFormat;
+    DenseImage mImg;
+    std::array<std::int64_t, 6> mExtent{};
+    bool mHaveExtent = false, mInPiece = false, mCells = false, mSawData = false;
+    int mPieces = 0;
+    std::size_t mPos = 0; ///< where the next tag is looked for
+    std::vector<Pending> mAppended;
+    std::string mAppendedEncoding;
+    std::size_t mAppendedStart = std::string_view::npos;
+};
+
+DenseImage VtiParser::parse()
+{
+    const auto file = nextTag(mS, 0, mSource);
+    if (!file || file->name != "VTKFile") inputError(mSource, "not a VTK XML file (no <VTKFile> element); expected a .vti file");
+    mFormat = binaryFormat(*file, mSource);
+    mPos = file->end;
+    while (auto tag = nextTag(mS, mPos, mSource)) {
+        mPos = tag->end;
+        if (tag->name == "ImageData") readImageData(*tag);
+        else if (tag->name == "Piece") readPiece(*tag);
+        else if (tag->name == "PointData" || tag->name == "CellData") readDataSection(*tag);
+        else if (tag->name == "DataArray") readDataArray(*tag);
+        else if (tag->name == "AppendedData") {
+            mAppendedEncoding = tag->attrs.count("encoding") ? tag->attrs.at("encoding") : "raw";
+            const std::size_t us = mS.find('_', tag->end);
+            if (us == std::string_view::npos) inputError(mSource, "<AppendedData> has no '_' marker");
+            mAppendedStart = us + 1;
             break; // raw bytes follow: stop scanning tags
         }
     }
-    if (!haveExtent) inputError(source, "no <ImageData WholeExtent=...> element; expected a .vti ImageData file");
-    if (!sawData) inputError(source, "no <PointData> or <CellData> arrays");
-    if (!appended.empty()) {
-        if (appendedStart == std::string_view::npos) inputError(source, "appended DataArrays but no <AppendedData> section");
-        if (appendedEncoding != "raw" && appendedEncoding != "base64")
-            inputError(source, "AppendedData encoding '" + appendedEncoding + "' is not supported; expected raw or base64");
-        std::string_view data = s.substr(appendedStart);
-        std::string decodedAll;
-        for (const auto& p : appended) {
-            const std::uint64_t need = img.voxelCount() * std::uint64_t(p.comps) * elemSize(p.e);
-            if (appendedEncoding == "raw") {
-                if (p.offset > data.size()) inputError(source, "appended DataArray " + q(p.name) + " offset is past the end of the file");
-                storeArray(img, p.name, p.comps, decodeBlocks(data.substr(p.offset), bf, need, source), p.e, bf.bigEndian);
-            } else {
-                // base64: the offset counts encoded characters.
-                if (p.offset > data.size()) inputError(source, "appended DataArray " + q(p.name) + " offset is past the end of the file");
-                std::string_view rest = data.substr(p.offset);
-                const std::size_t stop = rest.find('<');
-                rest = rest.substr(0, stop);
-                // Decode only this array: it ends where the next base64 array begins, which we
-                // cannot know without the header; decode everything up to '<' and use the front.
-                const std::string raw = base64Decode(rest, source);
-                storeArray(img, p.name, p.comps, decodeBlocks(raw, bf, need, source), p.e, bf.bigEndian);
-            }
-        }
-    }
-    if (img.arrays.empty()) inputError(source, "no DataArray in the file");
-    return img;
+    if (!mHaveExtent) inputError(mSource, "no <ImageData WholeExtent=...> element; expected a .vti ImageData file");
+    if (!mSawData) inputError(mSource, "no <PointData> or <CellData> arrays");
+    if (!mAppended.empty()) readAppendedArrays();
+    if (mImg.arrays.empty()) inputError(mSource, "no DataArray in the file");
+    return std::move(mImg);
 }
+
+void VtiParser::readImageData(const Tag& tag)
+{
+    const auto& a = tag.attrs;
+    if (!a.count("WholeExtent")) inputError(mSource, "<ImageData> has no WholeExtent");
+    const auto e = attrNumbers(tag, "WholeExtent", 6);
+    for (int i = 0; i < 6; ++i) {
+        if (std::fabs(e[i]) > 1e12 || e[i] != std::floor(e[i])) inputError(mSource, "WholeExtent has a non-integer or huge value");
+        mExtent[i] = std::int64_t(e[i]);
+    }
+    mHaveExtent = true;
+    if (a.count("Origin")) {
+        const auto o = attrNumbers(tag, "Origin", 3);
+        mImg.origin = openvdb::Vec3d(o[0], o[1], o[2]);
+    }
+    if (a.count("Spacing")) {
+        const auto sp = attrNumbers(tag, "Spacing", 3);
+        mImg.spacing = openvdb::Vec3d(sp[0], sp[1], sp[2]);
+    }
+    if (a.count("Direction")) {
+        const auto d = attrNumbers(tag, "Direction", 9);
+        const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+        for (int i = 0; i < 9; ++i)
+            if (std::fabs(d[i] - id[i]) > 1e-9) inputError(mSource, "a rotated ImageData (Direction not identity) is not supported");
+    }
+}
+
+void VtiParser::readPiece(const Tag& tag)
+{
+    if (++mPieces > 1) inputError(mSource, "several <Piece> elements; expected one piece (merge the pieces first)");
+    mInPiece = true;
+    if (tag.attrs.count("Extent")) {
+        const auto e = attrNumbers(tag, "Extent", 6);
+        for (int i = 0; i < 6; ++i)
+            if (double(mExtent[i]) != e[i]) inputError(mSource, "piece Extent differs from WholeExtent; expected one whole piece");
+    }
+}
+
+/// <PointData> or <CellData>: the first one fixes the geometry; arrays of the other kind are
+/// skipped.
+void VtiParser::readDataSection(const Tag& tag)
+{
+    if (!mHaveExtent) inputError(mSource, "<" + tag.name + "> before <ImageData WholeExtent=...>");
+    if (mSawData && mCells != (tag.name == "CellData")) {
+        const std::size_t close = mS.find("</" + tag.name + ">", mPos);
+        if (close == std::string_view::npos) inputError(mSource, "unterminated <" + tag.name + ">");
+        mPos = close;
+        return;
+    }
+    if (!mSawData) {
+        mCells = tag.name == "CellData";
+        mSawData = true;
+        finishGeometry(mImg, mExtent, mCells, mSource);
+    }
+}
+
+void VtiParser::readDataArray(const Tag& tag)
+{
+    if (!mSawData || !mInPiece) inputError(mSource, "<DataArray> outside <PointData>/<CellData> of a <Piece>");
+    const auto& a = tag.attrs;
+    const std::string name = a.count("Name") ? a.at("Name") : "array" + std::to_string(mImg.arrays.size());
+    const Elem e = vtkType(a.count("type") ? a.at("type") : "", mSource);
+    int comps = 1;
+    if (a.count("NumberOfComponents")) {
+        comps = std::atoi(a.at("NumberOfComponents").c_str());
+        if (comps != 1 && comps != 3)
+            inputError(mSource, "DataArray " + q(name) + " has " + a.at("NumberOfComponents") + " components; expected 1 or 3");
+    }
+    const std::uint64_t values = mImg.voxelCount() * std::uint64_t(comps);
+    const std::string format = a.count("format") ? a.at("format") : "ascii";
+    const std::size_t close = tag.selfClosing ? mPos : mS.find("</DataArray>", mPos);
+    if (close == std::string_view::npos) inputError(mSource, "unterminated <DataArray> " + q(name));
+    const std::string_view body = mS.substr(mPos, close - mPos);
+    if (format == "ascii") {
+        readAsciiArray(name, comps, values, body);
+    } else if (format == "binary") {
+        const std::string raw = base64Decode(body, mSource);
+        storeArray(mImg, name, comps, decodeBlocks(raw, mFormat, values * elemSize(e), mSource), e, mFormat.bigEndian);
+    } else if (format == "appended") {
+        if (!a.count("offset")) inputError(mSource, "appended DataArray " + q(name) + " has no offset");
+        char* end = nullptr;
+        const unsigned long long off = std::strtoull(a.at("offset").c_str(), &end, 10);
+        mAppended.push_back({name, comps, e, off});
+    } else {
+        inputError(mSource, "DataArray " + q(name) + " has format '" + format + "'; expected ascii, binary or appended");
+    }
+    mPos = close;
+}
+
+void VtiParser::readAsciiArray(const std::string& name, int comps, std::uint64_t values, std::string_view body)
+{
+    if (values > body.size() / 2 + 1)
+        inputError(mSource, "DataArray " + q(name) + " has too few values for the extent (" + std::to_string(values)
+                                + " needed; mismatched shape)");
+    DenseImage::Array arr;
+    arr.name = name;
+    arr.components = comps;
+    arr.data.reserve(values);
+    const std::string text(body);
+    const bool numeric = forEachNumber(text.c_str(), [&](double v) {
+        if (arr.data.size() == values)
+            inputError(mSource, "DataArray " + q(name) + " has more values than the extent needs ("
+                                    + std::to_string(values) + "; mismatched shape)");
+        arr.data.push_back(float(v));
+        return true;
+    });
+    if (!numeric) inputError(mSource, "DataArray " + q(name) + " has a value that is not a number");
+    if (arr.data.size() != values)
+        inputError(mSource, "DataArray " + q(name) + " has " + std::to_string(arr.data.size()) + " values; the extent needs "
+                                + std::to_string(values) + " (mismatched shape)");
+    mImg.arrays.push_back(std::move(arr));
+}
+
+void VtiParser::readAppendedArrays()
+{
+    if (mAppendedStart == std::string_view::npos) inputError(mSource, "appended DataArrays but no <AppendedData> section");
+    if (mAppendedEncoding != "raw" && mAppendedEncoding != "base64")
+        inputError(mSource, "AppendedData encoding '" + mAppendedEncoding + "' is not supported; expected raw or base64");
+    const std::string_view data = mS.substr(mAppendedStart);
+    for (const auto& p : mAppended) {
+        const std::uint64_t need = mImg.voxelCount() * std::uint64_t(p.comps) * elemSize(p.e);
+        if (p.offset > data.size()) inputError(mSource, "appended DataArray " + q(p.name) + " offset is past the end of the file");
+        if (mAppendedEncoding == "raw") {
+            storeArray(mImg, p.name, p.comps, decodeBlocks(data.substr(p.offset), mFormat, need, mSource), p.e, mFormat.bigEndian);
+            continue;
+        }
+        // base64: the offset counts encoded characters. This array ends where the next one begins,
+        // which we cannot know without the header: decode everything up to '<' and use the front.
+        std::string_view rest = data.substr(p.offset);
+        rest = rest.substr(0, rest.find('<'));
+        const std::string raw = base64Decode(rest, mSource);
+        storeArray(mImg, p.name, p.comps, decodeBlocks(raw, mFormat, need, mSource), p.e, mFormat.bigEndian);
+    }
+}
+
+} // namespace
+
+DenseImage parseVti(std::string_view s, const std::string& source) { return VtiParser(s, source).parse(); }
 
 // ---- legacy .vtk -------------------------------------------------------------------------
 
@@ -468,6 +539,54 @@ std::string upper(std::string w)
     return w;
 }
 
+/// A VECTORS, SCALARS or NORMALS section (`key`) after its keyword: name, type, values.
+void readLegacyArray(LegacyCursor& c, DenseImage& img, const std::string& key, bool binary)
+{
+    const std::string name = c.word();
+    const std::string type = c.word();
+    int comps = key == "SCALARS" ? 1 : 3;
+    if (key == "SCALARS") {
+        // optional numComp on the same line
+        const std::size_t save = c.pos;
+        const std::size_t eol = c.s.find('\n', c.pos);
+        const std::string rest(c.s.substr(c.pos, (eol == std::string_view::npos ? c.s.size() : eol) - c.pos));
+        const int nc = std::atoi(rest.c_str());
+        if (nc == 3) comps = 3;
+        else if (nc > 1) inputError(c.source, "SCALARS " + q(name) + " with " + std::to_string(nc) + " components; expected 1 or 3");
+        c.pos = save;
+        c.endLine();
+        // LOOKUP_TABLE line
+        const std::size_t before = c.pos;
+        if (upper(c.word()) == "LOOKUP_TABLE") c.endLine();
+        else c.pos = before;
+    } else {
+        c.endLine();
+    }
+    Elem e;
+    const std::string t = upper(type);
+    if (t == "FLOAT") e = Elem::F32;
+    else if (t == "DOUBLE") e = Elem::F64;
+    else inputError(c.source, key + " " + q(name) + " has type '" + type.substr(0, 20) + "'; expected float or double");
+    const std::uint64_t values = img.voxelCount() * std::uint64_t(comps);
+    if (binary) {
+        const std::uint64_t need = values * elemSize(e);
+        if (need > c.s.size() - c.pos)
+            inputError(c.source, key + " " + q(name) + " is cut short: needs " + std::to_string(need) + " bytes, "
+                                     + std::to_string(c.s.size() - c.pos) + " left (truncated or mismatched shape)");
+        storeArray(img, name, comps, c.s.substr(c.pos, need), e, /*big=*/true);
+        c.pos += need;
+    } else {
+        if (values > (c.s.size() - c.pos) / 2 + 1)
+            inputError(c.source, key + " " + q(name) + " has too few values for DIMENSIONS (mismatched shape or truncated)");
+        DenseImage::Array arr;
+        arr.name = name;
+        arr.components = comps;
+        arr.data.resize(values);
+        for (std::uint64_t i = 0; i < values; ++i) arr.data[i] = float(c.number(key + " " + q(name)));
+        img.arrays.push_back(std::move(arr));
+    }
+}
+
 } // namespace
 
 DenseImage parseLegacyVtk(std::string_view s, const std::string& source)
@@ -519,49 +638,7 @@ DenseImage parseLegacyVtk(std::string_view s, const std::string& source)
                                        + std::to_string(img.voxelCount()) + " expected; mismatched shape)");
         } else if (key == "VECTORS" || key == "SCALARS" || key == "NORMALS") {
             if (!haveData) inputError(source, key + " before POINT_DATA or CELL_DATA");
-            const std::string name = c.word();
-            const std::string type = c.word();
-            int comps = key == "SCALARS" ? 1 : 3;
-            if (key == "SCALARS") {
-                // optional numComp on the same line
-                const std::size_t save = c.pos;
-                const std::size_t eol = s.find('\n', c.pos);
-                const std::string rest(s.substr(c.pos, (eol == std::string_view::npos ? s.size() : eol) - c.pos));
-                const int nc = std::atoi(rest.c_str());
-                if (nc == 3) comps = 3;
-                else if (nc > 1) inputError(source, "SCALARS " + q(name) + " with " + std::to_string(nc) + " components; expected 1 or 3");
-                c.pos = save;
-                c.endLine();
-                // LOOKUP_TABLE line
-                const std::size_t before = c.pos;
-                if (upper(c.word()) == "LOOKUP_TABLE") c.endLine();
-                else c.pos = before;
-            } else {
-                c.endLine();
-            }
-            Elem e;
-            const std::string t = upper(type);
-            if (t == "FLOAT") e = Elem::F32;
-            else if (t == "DOUBLE") e = Elem::F64;
-            else inputError(source, key + " " + q(name) + " has type '" + type.substr(0, 20) + "'; expected float or double");
-            const std::uint64_t values = img.voxelCount() * std::uint64_t(comps);
-            if (mode == "BINARY") {
-                const std::uint64_t need = values * elemSize(e);
-                if (need > s.size() - c.pos)
-                    inputError(source, key + " " + q(name) + " is cut short: needs " + std::to_string(need) + " bytes, "
-                                           + std::to_string(s.size() - c.pos) + " left (truncated or mismatched shape)");
-                storeArray(img, name, comps, s.substr(c.pos, need), e, /*big=*/true);
-                c.pos += need;
-            } else {
-                if (values > (s.size() - c.pos) / 2 + 1)
-                    inputError(source, key + " " + q(name) + " has too few values for DIMENSIONS (mismatched shape or truncated)");
-                DenseImage::Array arr;
-                arr.name = name;
-                arr.components = comps;
-                arr.data.resize(values);
-                for (std::uint64_t i = 0; i < values; ++i) arr.data[i] = float(c.number(key + " " + q(name)));
-                img.arrays.push_back(std::move(arr));
-            }
+            readLegacyArray(c, img, key, mode == "BINARY");
         } else if (key == "FIELD" || key == "LOOKUP_TABLE" || key == "COLOR_SCALARS" || key == "TEXTURE_COORDINATES"
                    || key == "TENSORS") {
             inputError(source, key + " sections are not supported; expected VECTORS and SCALARS");

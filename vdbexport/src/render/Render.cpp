@@ -257,180 +257,233 @@ nlohmann::json cameraJson(const lic::Camera& c)
     return j;
 }
 
-nlohmann::json render(const RenderJob& job, lic::Progress& progress)
+namespace {
+
+/// A colormap by name, or read from a value,r,g,b .csv file.
+lic::Colormap loadColormap(const std::string& nameOrPath)
 {
-    const auto tStart = Clock::now();
-    // Validate everything cheap before reading anything.
-    if (job.output.empty()) throw lic::InputError("no output image; give --out IMAGE.png (or .exr)");
-    const bool linearOut = isSceneLinearPath(job.output);
-    const bool gifOut = fs::path(job.output).extension() == ".gif";
-    lic::RenderSettings settings = job.settings;
-    if (!job.colormap.empty()) {
-        std::error_code ec;
-        if (fs::is_regular_file(job.colormap, ec)) {
-            std::ifstream in(job.colormap);
-            std::stringstream ss;
-            ss << in.rdbuf();
-            settings.colormap = lic::Colormap::fromCsv(ss.str(), job.colormap);
-        } else {
-            settings.colormap = lic::Colormap::named(job.colormap);
-        }
-    }
-    settings.validate();
-    lic::CameraSettings camSettings = job.camera;
-    const auto [az, el] = lic::viewAngles(job.view.value_or(lic::View::Front));
-    camSettings.azimuth = job.azimuth.value_or(az);
-    camSettings.elevation = job.elevation.value_or(el);
-    camSettings.validate();
+    std::error_code ec;
+    if (!fs::is_regular_file(nameOrPath, ec)) return lic::Colormap::named(nameOrPath);
+    std::ifstream in(nameOrPath);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return lic::Colormap::fromCsv(ss.str(), nameOrPath);
+}
+
+/// What a render settles before it reads anything.
+struct RenderPlan
+{
+    lic::RenderSettings settings;  ///< densityScale becomes the first frame's when it is auto
+    bool autoScale = false;        ///< densityScale was 0 = auto
+    lic::CameraSettings camera;
     DisplayTransform display;
-    if (!linearOut || job.gif) {
-        display.config = findOcioConfig(job.ocioConfig);
-        display.view = viewFromFlag(job.viewTransform);
-        toDisplay(lic::Image(1, 1), display); // fail now on a bad config, not after rendering
+    bool linearOut = false;        ///< an .exr: no display transform
+    bool gifOut = false;           ///< --out is the .gif
+};
+
+/// @throw lic::InputError for any bad setting, before a file is read.
+RenderPlan planRender(const RenderJob& job)
+{
+    if (job.output.empty()) throw lic::InputError("no output image; give --out IMAGE.png (or .exr)");
+    RenderPlan plan;
+    plan.linearOut = isSceneLinearPath(job.output);
+    plan.gifOut = fs::path(job.output).extension() == ".gif";
+    plan.settings = job.settings;
+    if (!job.colormap.empty()) plan.settings.colormap = loadColormap(job.colormap);
+    plan.settings.validate();
+    plan.autoScale = plan.settings.densityScale == 0.0;
+    plan.camera = job.camera;
+    const auto [az, el] = lic::viewAngles(job.view.value_or(lic::View::Front));
+    plan.camera.azimuth = job.azimuth.value_or(az);
+    plan.camera.elevation = job.elevation.value_or(el);
+    plan.camera.validate();
+    if (!plan.linearOut || job.gif) {
+        plan.display.config = findOcioConfig(job.ocioConfig);
+        plan.display.view = viewFromFlag(job.viewTransform);
+        toDisplay(lic::Image(1, 1), plan.display); // fail now on a bad config, not after rendering
     }
-    if (job.gif && gifOut) throw lic::InputError("--gif writes OUT.gif beside a sequence of images; --out is already a .gif");
+    if (job.gif && plan.gifOut) throw lic::InputError("--gif writes OUT.gif beside a sequence of images; --out is already a .gif");
     if (job.eyeSeparation && !(*job.eyeSeparation > 0.0))
         throw lic::InputError("--eye-separation must be > 0 (world units)");
     if (!(job.fps > 0.0 && job.fps <= 100.0)) throw lic::InputError("--fps must be in (0, 100]");
+    return plan;
+}
 
-    const std::vector<std::string> inputs = renderInputs(job.input, job.frames);
-    const int frames = int(inputs.size());
-    if (job.gif && frames < 2 && !gifOut)
-        throw lic::InputError("--gif needs a sequence (--frames N or a manifest listing several files)");
+void add(lic::RenderStats& total, const lic::RenderStats& more)
+{
+    total.rays += more.rays;
+    total.samples += more.samples;
+    total.skippedBricks += more.skippedBricks;
+}
 
-    openvdb::Vec3SGrid::Ptr flow;
-    if (!job.field.empty()) flow = readVelocityGrid(job.field);
-
-    std::vector<std::string> written;
+/// What a render has done so far, frame by frame.
+struct RenderRun
+{
+    std::vector<std::string> written; ///< image files, removed if the render fails
     std::vector<lic::Image> gifFrames;
-    nlohmann::json cameras, summary;
     double tLoad = 0, tRender = 0, tWrite = 0;
     lic::RenderStats total;
     bool usedHalo = false, lit = false, colored = false;
-    double usedScale = settings.densityScale;
-    const bool autoScale = settings.densityScale == 0.0;
-    std::optional<lic::Camera> camera;
+    std::optional<lic::Camera> camera; ///< one camera for the whole sequence, framed on the first frame
     std::optional<std::pair<lic::Camera, lic::Camera>> eyes;
+    double eyeSeparation = 0;
     std::vector<std::pair<std::string, std::string>> firstGrids;
-    try {
-        for (int f = 1; f <= frames; ++f) {
-            auto t0 = Clock::now();
-            LoadedVolume lv = loadVolume(inputs[std::size_t(f - 1)], /*wantHalo=*/true, settings.colormap.has_value(),
-                                         settings.lighting.enabled);
-            if (f == 1) firstGrids = lv.gridTypes;
-            if (settings.lighting.enabled) lv.volume.flow = flow;
-            lic::HaloRaycaster caster(lv.volume, settings, progress);
-            tLoad += seconds(t0);
-            usedHalo = caster.hasHalo();
-            usedScale = caster.settings().densityScale;
-            settings.densityScale = usedScale; // a sequence keeps the first frame's (auto) scale
-            lit = caster.hasTangent() && settings.lighting.enabled;
-            colored = caster.hasColor();
-            // One camera for the whole sequence, framed on the first frame.
-            if (!camera) {
-                camera = lic::makeCamera(camSettings, caster.worldBBox());
-                if (job.stereo != lic::StereoMode::None)
-                    eyes = lic::stereoPair(*camera, job.eyeSeparation.value_or(camera->distance / 30.0));
-            }
-            t0 = Clock::now();
-            lic::Image img;
-            lic::RenderStats st;
-            if (eyes) {
-                lic::RenderStats st2;
-                const lic::Image l = caster.render(eyes->first, progress, &st);
-                const lic::Image r = caster.render(eyes->second, progress, &st2);
-                st.rays += st2.rays;
-                st.samples += st2.samples;
-                st.skippedBricks += st2.skippedBricks;
-                img = job.stereo == lic::StereoMode::SideBySide ? lic::sideBySide(l, r) : lic::anaglyph(l, r);
-            } else {
-                img = caster.render(*camera, progress, &st);
-            }
-            tRender += seconds(t0);
-            total.rays += st.rays;
-            total.samples += st.samples;
-            total.skippedBricks += st.skippedBricks;
+};
 
-            t0 = Clock::now();
-            if (gifOut) {
-                gifFrames.push_back(std::move(img));
-            } else {
-                // Images are numbered as their files (an unsteady sequence's field frames).
-                const auto n = numberedStem(fs::path(inputs[std::size_t(f - 1)]).stem().string());
-                const std::string path = imageFramePath(job.output, n ? n->second : f, frames);
-                writeImageAtomic(path, img, display,
-                                 {{"Software", std::string("licvdb ") + LICVDB_VERSION},
-                                  {"ImageDescription", "licvdb render of " + inputs[std::size_t(f - 1)]}});
-                written.push_back(path);
-                if (job.gif) gifFrames.push_back(std::move(img));
-            }
-            tWrite += seconds(t0);
-        }
-        const auto t0 = Clock::now();
-        if (gifOut) {
-            writeGifAtomic(job.output, gifFrames, display, job.fps);
-            written.push_back(job.output);
-        } else if (job.gif) {
-            fs::path g(job.output);
-            g.replace_extension(".gif");
-            writeGifAtomic(g.string(), gifFrames, display, job.fps);
-            written.push_back(g.string());
-        }
-        tWrite += seconds(t0);
+/// The image of `caster` through the run's camera, or its stereo eyes put together.
+lic::Image renderView(const lic::HaloRaycaster& caster, lic::StereoMode stereo, RenderRun& run, lic::Progress& progress)
+{
+    lic::RenderStats st;
+    if (!run.eyes) {
+        lic::Image img = caster.render(*run.camera, progress, &st);
+        add(run.total, st);
+        return img;
+    }
+    lic::RenderStats st2;
+    const lic::Image l = caster.render(run.eyes->first, progress, &st);
+    const lic::Image r = caster.render(run.eyes->second, progress, &st2);
+    add(st, st2);
+    add(run.total, st);
+    return stereo == lic::StereoMode::SideBySide ? lic::sideBySide(l, r) : lic::anaglyph(l, r);
+}
+
+/// Read, render and write (or keep for the GIF) frame `f` (1-based) of `inputs`.
+void renderFrame(const RenderJob& job, RenderPlan& plan, const std::vector<std::string>& inputs, int f,
+                 const openvdb::Vec3SGrid::Ptr& flow, lic::Progress& progress, RenderRun& run)
+{
+    lic::RenderSettings& settings = plan.settings;
+    const std::string& input = inputs[std::size_t(f - 1)];
+    auto t0 = Clock::now();
+    LoadedVolume lv = loadVolume(input, /*wantHalo=*/true, settings.colormap.has_value(), settings.lighting.enabled);
+    if (f == 1) run.firstGrids = lv.gridTypes;
+    if (settings.lighting.enabled) lv.volume.flow = flow;
+    lic::HaloRaycaster caster(lv.volume, settings, progress);
+    run.tLoad += seconds(t0);
+    run.usedHalo = caster.hasHalo();
+    settings.densityScale = caster.settings().densityScale; // a sequence keeps the first frame's (auto) scale
+    run.lit = caster.hasTangent() && settings.lighting.enabled;
+    run.colored = caster.hasColor();
+    if (!run.camera) {
+        run.camera = lic::makeCamera(plan.camera, caster.worldBBox());
+        run.eyeSeparation = job.eyeSeparation.value_or(run.camera->distance / 30.0);
+        if (job.stereo != lic::StereoMode::None) run.eyes = lic::stereoPair(*run.camera, run.eyeSeparation);
+    }
+    t0 = Clock::now();
+    lic::Image img = renderView(caster, job.stereo, run, progress);
+    run.tRender += seconds(t0);
+
+    t0 = Clock::now();
+    if (plan.gifOut) {
+        run.gifFrames.push_back(std::move(img));
+    } else {
+        // Images are numbered as their files (an unsteady sequence's field frames).
+        const auto n = numberedStem(fs::path(input).stem().string());
+        const std::string path = imageFramePath(job.output, n ? n->second : f, int(inputs.size()));
+        writeImageAtomic(path, img, plan.display,
+                         {{"Software", std::string("licvdb ") + LICVDB_VERSION},
+                          {"ImageDescription", "licvdb render of " + input}});
+        run.written.push_back(path);
+        if (job.gif) run.gifFrames.push_back(std::move(img));
+    }
+    run.tWrite += seconds(t0);
+}
+
+/// The animated GIF: --out itself, or OUT.gif beside the images with --gif.
+void writeGif(const RenderJob& job, const RenderPlan& plan, RenderRun& run)
+{
+    const auto t0 = Clock::now();
+    if (plan.gifOut) {
+        writeGifAtomic(job.output, run.gifFrames, plan.display, job.fps);
+        run.written.push_back(job.output);
+    } else if (job.gif) {
+        fs::path g(job.output);
+        g.replace_extension(".gif");
+        writeGifAtomic(g.string(), run.gifFrames, plan.display, job.fps);
+        run.written.push_back(g.string());
+    }
+    run.tWrite += seconds(t0);
+}
+
+nlohmann::json settingsJson(const RenderPlan& plan)
+{
+    const lic::RenderSettings& s = plan.settings;
+    return {{"density_scale", s.densityScale},
+            {"density_scale_auto", plan.autoScale},
+            {"density_range", {s.densityLow, s.densityHigh}},
+            {"brightness", s.brightness},
+            {"step_voxels", s.step},
+            {"halo_strength", s.haloStrength},
+            {"halo_threshold", s.haloThreshold},
+            {"colormap", s.colormap ? nlohmann::json(s.colormap->name()) : nlohmann::json(nullptr)},
+            {"light", s.lighting.headlight ? nlohmann::json("headlight") : vec(s.lighting.direction)},
+            {"view_transform", plan.linearOut ? nlohmann::json(nullptr) : nlohmann::json(plan.display.view)},
+            {"ocio_config", plan.display.config.empty() ? nlohmann::json(nullptr) : nlohmann::json(plan.display.config)},
+            {"threads", s.threads}};
+}
+
+/// The summary `licvdb render --json` prints.
+nlohmann::json summaryJson(const RenderJob& job, const RenderPlan& plan, const std::vector<std::string>& inputs,
+                           const RenderRun& run, Clock::time_point tStart)
+{
+    nlohmann::json grids = nlohmann::json::array();
+    for (const auto& [n, t] : run.firstGrids) grids.push_back({{"name", n}, {"type", t}});
+    const int width = plan.camera.width, height = plan.camera.height;
+    nlohmann::json summary = {
+        {"input", job.input},
+        {"inputs", inputs},
+        {"output", job.output},
+        {"files", run.written},
+        {"frames", int(inputs.size())},
+        {"size", {width, height}},
+        {"camera", cameraJson(*run.camera)},
+        {"stereo", nullptr},
+        {"grids", grids},
+        {"halos", run.usedHalo},
+        {"illuminated", run.lit},
+        {"colored", run.colored},
+        {"settings", settingsJson(plan)},
+        {"stats",
+         {{"rays", run.total.rays},
+          {"samples", run.total.samples},
+          {"samples_per_ray", run.total.rays ? double(run.total.samples) / double(run.total.rays) : 0.0},
+          {"skipped_bricks", run.total.skippedBricks}}},
+        {"seconds", {{"load", run.tLoad}, {"render", run.tRender}, {"write", run.tWrite}, {"total", seconds(tStart)}}},
+    };
+    summary["image_size"] = {width, height};
+    if (run.eyes) {
+        summary["stereo"] = {{"mode", lic::toString(job.stereo)},
+                             {"eye_separation", run.eyeSeparation},
+                             {"left", cameraJson(run.eyes->first)},
+                             {"right", cameraJson(run.eyes->second)}};
+        if (job.stereo == lic::StereoMode::SideBySide) summary["image_size"] = {2 * width, height};
+    }
+    return summary;
+}
+
+} // namespace
+
+nlohmann::json render(const RenderJob& job, lic::Progress& progress)
+{
+    const auto tStart = Clock::now();
+    RenderPlan plan = planRender(job); // everything cheap is checked before anything is read
+    const std::vector<std::string> inputs = renderInputs(job.input, job.frames);
+    if (job.gif && inputs.size() < 2 && !plan.gifOut)
+        throw lic::InputError("--gif needs a sequence (--frames N or a manifest listing several files)");
+    openvdb::Vec3SGrid::Ptr flow;
+    if (!job.field.empty()) flow = readVelocityGrid(job.field);
+
+    RenderRun run;
+    try {
+        for (int f = 1; f <= int(inputs.size()); ++f) renderFrame(job, plan, inputs, f, flow, progress, run);
+        writeGif(job, plan, run);
     } catch (...) {
-        for (const auto& p : written) {
+        for (const auto& p : run.written) {
             std::error_code ec;
             fs::remove(p, ec);
         }
         throw;
     }
-
-    nlohmann::json grids = nlohmann::json::array();
-    for (const auto& [n, t] : firstGrids) grids.push_back({{"name", n}, {"type", t}});
-    summary = {
-        {"input", job.input},
-        {"inputs", inputs},
-        {"output", job.output},
-        {"files", written},
-        {"frames", frames},
-        {"size", {camSettings.width, camSettings.height}},
-        {"camera", cameraJson(*camera)},
-        {"stereo", nullptr},
-        {"grids", grids},
-        {"halos", usedHalo},
-        {"illuminated", lit},
-        {"colored", colored},
-        {"settings",
-         {{"density_scale", usedScale},
-          {"density_scale_auto", autoScale},
-          {"density_range", {settings.densityLow, settings.densityHigh}},
-          {"brightness", settings.brightness},
-          {"step_voxels", settings.step},
-          {"halo_strength", settings.haloStrength},
-          {"halo_threshold", settings.haloThreshold},
-          {"colormap", settings.colormap ? nlohmann::json(settings.colormap->name()) : nlohmann::json(nullptr)},
-          {"light", settings.lighting.headlight ? nlohmann::json("headlight") : vec(settings.lighting.direction)},
-          {"view_transform", linearOut ? nlohmann::json(nullptr) : nlohmann::json(display.view)},
-          {"ocio_config", display.config.empty() ? nlohmann::json(nullptr) : nlohmann::json(display.config)},
-          {"threads", settings.threads}}},
-        {"stats",
-         {{"rays", total.rays},
-          {"samples", total.samples},
-          {"samples_per_ray", total.rays ? double(total.samples) / double(total.rays) : 0.0},
-          {"skipped_bricks", total.skippedBricks}}},
-        {"seconds", {{"load", tLoad}, {"render", tRender}, {"write", tWrite}, {"total", seconds(tStart)}}},
-    };
-    if (eyes) {
-        summary["stereo"] = {{"mode", lic::toString(job.stereo)},
-                             {"eye_separation", job.eyeSeparation.value_or(camera->distance / 30.0)},
-                             {"left", cameraJson(eyes->first)},
-                             {"right", cameraJson(eyes->second)}};
-        summary["image_size"] = {job.stereo == lic::StereoMode::SideBySide ? 2 * camSettings.width : camSettings.width,
-                                 camSettings.height};
-    } else {
-        summary["image_size"] = {camSettings.width, camSettings.height};
-    }
-    return summary;
+    return summaryJson(job, plan, inputs, run, tStart);
 }
 
 } // namespace vdbexport

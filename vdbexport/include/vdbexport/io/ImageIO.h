@@ -3,7 +3,7 @@
 // Every file is written to a temporary name and renamed, so a failure leaves no partial file.
 #pragma once
 
-#include <lic/render/Raycaster.h>
+#include <lic/render/Image.h>
 
 #include <map>
 #include <string>
