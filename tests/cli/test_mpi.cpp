@@ -389,6 +389,12 @@ TEST_F(MpiBake, ACorruptVdbIsRefusedByTheSameChecksOnEveryRank)
     const RunResult r = bake(2, "out.vdb", withField(kNoise, cut.string()));
     expectCleanFailure(r, 2, "expected an intact OpenVDB .vdb file");
     EXPECT_EQ(r.err.find("licvdb bake: error"), r.err.rfind("licvdb bake: error")) << r.describe();
+    // Refused by the structural check (layer 1: its marker and rule, vdbexport/io/VdbCheck.h) on
+    // both ranks, not by OpenVDB's reader, whose message ("cannot read …") also ends in "expected
+    // an intact OpenVDB .vdb file".
+    const std::string byTheCheck = "all 2 ranks failed while reading the field: " + std::string(vdbexport::kVdbCheckMarker)
+                                 + "grid-end] '" + cut.string() + "' is truncated or corrupt";
+    EXPECT_NE(r.err.find(byTheCheck), std::string::npos) << "expected \"" << byTheCheck << "\"\n" << r.describe();
 }
 
 TEST_F(MpiBake, AFieldMissingOnEveryRankIsOneMessage)

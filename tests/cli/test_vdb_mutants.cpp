@@ -89,12 +89,16 @@ TEST_F(VdbMutantsTest, InfoCheckExitsZeroForIntactFilesAndTwoWithTheReasonOtherw
         EXPECT_EQ(r.code, 2) << r.describe();
         EXPECT_NE(r.err.find("claims 8182 bytes where 6144 are expected"), std::string::npos) << r.describe();
         EXPECT_NE(r.err.find("lying.vdb"), std::string::npos) << r.describe();
+        // Refused by the structural check (layer 1), by name: its marker and rule begin the reason.
+        EXPECT_NE(r.err.find("error: " + std::string(vdbexport::kVdbCheckMarker) + "blosc-nbytes] "), std::string::npos)
+            << r.describe();
     }
     const RunResult bad = run({"info", "--check", "--json", (w / "lying.vdb").string()});
     EXPECT_EQ(bad.code, 2) << bad.describe();
     const auto no = nlohmann::json::parse(bad.out);
     EXPECT_FALSE(no["ok"].get<bool>());
     EXPECT_NE(no["error"].get<std::string>().find("8182"), std::string::npos);
+    EXPECT_EQ(vdbexport::vdbCheckRule(no["error"].get<std::string>()), "blosc-nbytes");
     EXPECT_FALSE(fs::exists(w / "out.vdb"));
     EXPECT_FALSE(fs::exists(w / "x.png"));
 }

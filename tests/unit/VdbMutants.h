@@ -2,13 +2,46 @@
 // words (huge, negative, or a little off: the lies that made OpenVDB 10 overrun a leaf buffer).
 #pragma once
 
+#include <gtest/gtest.h>
+
+#include <lic/util/Error.h>
+
 #include <cstdint>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iterator>
 #include <random>
 #include <string>
 #include <vector>
 
 namespace vdb_mutants {
+
+/// The whole file at `path` ("" if it cannot be read).
+inline std::string readFile(const std::filesystem::path& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+/// Writes `bytes` to `path`, replacing it.
+inline void writeFile(const std::filesystem::path& path, const std::string& bytes)
+{
+    std::ofstream(path, std::ios::binary | std::ios::trunc).write(bytes.data(), std::streamsize(bytes.size()));
+}
+
+/// The message of the lic::InputError that `fn` throws; a test failure (and "") if it throws none.
+inline std::string inputErrorOf(const std::function<void()>& fn)
+{
+    try {
+        fn();
+    } catch (const lic::InputError& e) {
+        return e.what();
+    }
+    ADD_FAILURE() << "expected lic::InputError, nothing was thrown";
+    return {};
+}
 
 /// The kinds of mutation, for reporting.
 inline const char* kindName(int kind)

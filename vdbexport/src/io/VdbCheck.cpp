@@ -19,6 +19,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <map>
 #include <memory>
@@ -33,6 +34,12 @@ namespace vdbexport {
 namespace {
 
 std::string quote(const std::string& s) { return "'" + s + "'"; }
+
+/// A refusal by the check: the marker and the rule's name (VdbCheck.h), then the message.
+lic::InputError refusal(const char* rule, const std::string& message)
+{
+    return lic::InputError(std::string(kVdbCheckMarker) + rule + "] " + message);
+}
 
 constexpr uint64_t kBloscOverhead = BLOSC_MAX_OVERHEAD; // 16-byte blosc header
 constexpr uint64_t kGuardBytes = 4096;                  // checked slack after each decoded block
@@ -137,12 +144,14 @@ public:
     {
         mFile = std::fopen(path.c_str(), "rb");
         if (!mFile)
-            throw lic::InputError("cannot open " + quote(path) + " for reading (" + std::strerror(errno)
+            throw refusal("open", "cannot open " + quote(path) + " for reading (" + std::strerror(errno)
                                   + "); expected a readable .vdb file");
         std::setvbuf(mFile, nullptr, _IOFBF, 1 << 20);
-        if (fseeko(mFile, 0, SEEK_END) != 0) throw corrupt("cannot seek in the file");
+        if (fseeko(mFile, 0, SEEK_END) != 0) throw corrupt("not-seekable", "cannot seek in the file");
         const off_t end = ftello(mFile);
-        if (end < 0) throw corrupt("cannot tell the file size");
+        // no-size: unreachable (tests/unit/test_vdbcheck_rules.cpp lists it), ftello does not fail
+        // once fseeko to the end has succeeded.
+        if (end < 0) throw corrupt("no-size", "cannot tell the file size");
         mSize = uint64_t(end);
         fseeko(mFile, 0, SEEK_SET);
     }
@@ -160,16 +169,16 @@ private:
         for (const auto& w : mWhere) s += (s.empty() ? "" : ", ") + w;
         return s;
     }
-    lic::InputError corrupt(const std::string& what) const
+    lic::InputError corrupt(const char* rule, const std::string& what) const
     {
         const std::string w = where();
-        return lic::InputError(quote(mPath) + " is corrupt: " + (w.empty() ? "" : w + ": ") + what + " (at byte "
+        return refusal(rule, quote(mPath) + " is corrupt: " + (w.empty() ? "" : w + ": ") + what + " (at byte "
                                + std::to_string(mPos) + "); expected an intact OpenVDB .vdb file");
     }
-    lic::InputError truncated(const std::string& what) const
+    lic::InputError truncated(const char* rule, const std::string& what) const
     {
         const std::string w = where();
-        return lic::InputError(quote(mPath) + " is truncated or corrupt: " + (w.empty() ? "" : w + ": ") + what
+        return refusal(rule, quote(mPath) + " is truncated or corrupt: " + (w.empty() ? "" : w + ": ") + what
                                + " (the file has " + std::to_string(mSize)
                                + " bytes); expected an intact OpenVDB .vdb file");
     }
@@ -185,8 +194,10 @@ private:
     uint64_t left() const { return mSize - mPos; }
     void read(void* dst, uint64_t n, const char* what)
     {
-        if (n > left()) throw truncated(std::string(what) + " is cut short at byte " + std::to_string(mPos));
-        if (n > 0 && std::fread(dst, 1, n, mFile) != n) throw truncated(std::string("reading ") + what + " failed");
+        if (n > left()) throw truncated("cut-short", std::string(what) + " is cut short at byte " + std::to_string(mPos));
+        // read-failed: reachable only if the file shrinks (or the disk fails) while it is checked;
+        // no file can provoke it.
+        if (n > 0 && std::fread(dst, 1, n, mFile) != n) throw truncated("read-failed", std::string("reading ") + what + " failed");
         mPos += n;
     }
     template<typename T> T get(const char* what)
@@ -197,13 +208,16 @@ private:
     }
     void skip(uint64_t n, const char* what)
     {
-        if (n > left()) throw truncated(std::string(what) + " is cut short at byte " + std::to_string(mPos));
-        if (n > 0 && fseeko(mFile, off_t(n), SEEK_CUR) != 0) throw truncated(std::string("seeking over ") + what + " failed");
+        if (n > left()) throw truncated("skip-cut-short", std::string(what) + " is cut short at byte " + std::to_string(mPos));
+        // skip-failed: unreachable, seeking forward within a regular file's size does not fail.
+        if (n > 0 && fseeko(mFile, off_t(n), SEEK_CUR) != 0) throw truncated("skip-failed", std::string("seeking over ") + what + " failed");
         mPos += n;
     }
     void seek(uint64_t p)
     {
-        if (p > mSize || fseeko(mFile, off_t(p), SEEK_SET) != 0) throw truncated("cannot seek to byte " + std::to_string(p));
+        // seek: redundant, run() seeks only to a grid's end offset, which it has checked against the
+        // file's size (rule grid-end).
+        if (p > mSize || fseeko(mFile, off_t(p), SEEK_SET) != 0) throw truncated("seek", "cannot seek to byte " + std::to_string(p));
         mPos = p;
     }
     /// A string as OpenVDB writes one (uint32 length, bytes).
@@ -211,7 +225,7 @@ private:
     {
         const uint32_t n = get<uint32_t>(what);
         if (n > left() || n > kMaxStringBytes)
-            throw truncated(std::string(what) + " claims " + std::to_string(n) + " bytes, more than the file has left");
+            throw truncated("string-size", std::string(what) + " claims " + std::to_string(n) + " bytes, more than the file has left");
         std::string s(n, '\0');
         read(s.data(), n, what);
         return s;
@@ -267,19 +281,19 @@ void Checker::header(VdbCheckResult& r)
         std::string head(mSize, '\0');
         read(head.data(), mSize, "header");
         if (!head.empty() && std::memcmp(head.data(), &expected, head.size()) == 0)
-            throw truncated("its header is cut short");
-        throw lic::InputError(quote(mPath) + " is not an OpenVDB file (no VDB header); expected a .vdb file");
+            throw truncated("header-short", "its header is cut short");
+        throw refusal("not-vdb-short", quote(mPath) + " is not an OpenVDB file (no VDB header); expected a .vdb file");
     }
     magic = get<int64_t>("header");
     if (magic != expected)
-        throw lic::InputError(quote(mPath) + " is not an OpenVDB file (no VDB header); expected a .vdb file");
-    if (left() < 4 + 4 + 4 + 1 + 36) throw truncated("its header is cut short");
+        throw refusal("not-vdb", quote(mPath) + " is not an OpenVDB file (no VDB header); expected a .vdb file");
+    if (left() < 4 + 4 + 4 + 1 + 36) throw truncated("header-cut-short", "its header is cut short");
     mVersion = get<uint32_t>("header");
     r.fileVersion = mVersion;
     r.libraryMajor = get<uint32_t>("header");
     r.libraryMinor = get<uint32_t>("header");
     if (mVersion < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION || mVersion > openvdb::OPENVDB_FILE_VERSION)
-        throw lic::InputError(quote(mPath) + " has VDB file format version " + std::to_string(mVersion)
+        throw refusal("version", quote(mPath) + " has VDB file format version " + std::to_string(mVersion)
                               + " (written by OpenVDB " + std::to_string(r.libraryMajor) + "."
                               + std::to_string(r.libraryMinor) + "); licvdb reads versions "
                               + std::to_string(openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION) + " to "
@@ -291,7 +305,7 @@ void Checker::checkBools(const char* data, uint64_t n)
 {
     for (uint64_t i = 0; i < n; ++i)
         if (static_cast<unsigned char>(data[i]) > 1)
-            throw corrupt("a bool value is " + std::to_string(static_cast<unsigned char>(data[i])) + ", not 0 or 1");
+            throw corrupt("bool-value", "a bool value is " + std::to_string(static_cast<unsigned char>(data[i])) + ", not 0 or 1");
 }
 
 Checker::MetaInfo Checker::metaMap()
@@ -299,7 +313,7 @@ Checker::MetaInfo Checker::metaMap()
     const uint32_t count = get<uint32_t>("the metadata count");
     // Each entry takes at least 12 bytes (two string lengths and a size).
     if (uint64_t(count) * 12 > left())
-        throw truncated("it claims " + std::to_string(count) + " metadata entries, more than the file can hold");
+        throw truncated("meta-count", "it claims " + std::to_string(count) + " metadata entries, more than the file can hold");
     MetaInfo info;
     for (uint32_t i = 0; i < count; ++i) {
         const std::string name = string("a metadata name");
@@ -307,7 +321,7 @@ Checker::MetaInfo Checker::metaMap()
         const std::string type = string("a metadata type name");
         const uint32_t bytes = get<uint32_t>("a metadata size");
         if (bytes > left())
-            throw truncated("the value claims " + std::to_string(bytes) + " bytes, more than the file has left");
+            throw truncated("meta-size", "the value claims " + std::to_string(bytes) + " bytes, more than the file has left");
         metadataValue(name, type, bytes, info);
     }
     return info;
@@ -319,7 +333,7 @@ void Checker::metadataValue(const std::string& name, const std::string& type, ui
     // and reading the metadata replaces what the grid descriptor said: this value decides.
     const bool halfFlag = name == openvdb::GridBase::META_SAVE_HALF_FLOAT;
     if (halfFlag && type != openvdb::typeNameAsString<bool>())
-        throw corrupt("the half-float flag is a " + type + ", not a bool");
+        throw corrupt("half-flag-type", "the half-float flag is a " + type + ", not a bool");
     if (type == openvdb::io::DelayedLoadMetadata::staticTypeName()) {
         delayedLoad(bytes, info.delayedCount);
         return;
@@ -327,7 +341,7 @@ void Checker::metadataValue(const std::string& name, const std::string& type, ui
     const auto& sizes = metadataSizes();
     if (const auto it = sizes.find(type); it != sizes.end()) {
         if (bytes != it->second)
-            throw corrupt("a " + type + " value stores " + std::to_string(bytes) + " bytes; a " + type + " has "
+            throw corrupt("meta-value-size", "a " + type + " value stores " + std::to_string(bytes) + " bytes; a " + type + " has "
                           + std::to_string(it->second));
         if (type == openvdb::typeNameAsString<bool>()) {
             char b = 0;
@@ -343,7 +357,9 @@ void Checker::metadataValue(const std::string& name, const std::string& type, ui
         skip(bytes, "a metadata value"); // strings and unknown types: OpenVDB reads `bytes` bytes
         return;
     }
-    throw corrupt("metadata type " + quote(type) + " is not one licvdb can check");
+    // meta-type: unreachable with OpenVDB 10's own registrations (each registered type is in
+    // metadataSizes(), a string or the delayed-load table): for types a program registers itself.
+    throw corrupt("meta-type", "metadata type " + quote(type) + " is not one licvdb can check");
 }
 
 /// DelayedLoadMetadata::readValue: count, a blosc block (or raw) of count int8 masks, then a
@@ -353,14 +369,14 @@ void Checker::delayedLoad(uint32_t bytes, int64_t& delayedCount)
     if (bytes == 0) return;
     const uint64_t end = mPos + bytes;
     const auto need = [&](uint64_t n, const char* what) {
-        if (n > end - mPos) throw corrupt(std::string(what) + " runs past the end of the metadata value");
+        if (n > end - mPos) throw corrupt("delayed-overrun", std::string(what) + " runs past the end of the metadata value");
     };
     need(8, "the delayed-load table");
     const uint32_t count = get<uint32_t>("the delayed-load count");
     // One entry per leaf, and every leaf takes at least 129 bytes of the file (two value masks
     // and a compression byte): a larger count cannot be true (and would cost memory to decode).
     if (uint64_t(count) * 129 > mSize)
-        throw corrupt("the delayed-load table lists " + std::to_string(count) + " leaves, more than a file of "
+        throw corrupt("delayed-count", "the delayed-load table lists " + std::to_string(count) + " leaves, more than a file of "
                       + std::to_string(mSize) + " bytes can hold");
     delayedCount = count;
     for (int part = 0; part < 2; ++part) {
@@ -379,7 +395,8 @@ void Checker::delayedLoad(uint32_t bytes, int64_t& delayedCount)
         read(data.data(), stored, "a delayed-load blosc block");
         bloscBlock(data, expected, false, /*padded=*/true);
     }
-    if (mPos > end) throw corrupt("the delayed-load table runs past its metadata value");
+    // delayed-end: redundant, need() has kept every read of the table within `end`.
+    if (mPos > end) throw corrupt("delayed-end", "the delayed-load table runs past its metadata value");
     skip(end - mPos, "a metadata value");
 }
 
@@ -396,57 +413,59 @@ void Checker::transform(bool nested)
         doubles(16);
         const double det = v[0] * (v[5] * v[10] - v[6] * v[9]) - v[1] * (v[4] * v[10] - v[6] * v[8])
                          + v[2] * (v[4] * v[9] - v[5] * v[8]);
-        if (!(std::abs(det) > 0) || !std::isfinite(det)) throw corrupt("the matrix is singular or not finite");
+        if (!(std::abs(det) > 0) || !std::isfinite(det)) throw corrupt("affine-singular", "the matrix is singular or not finite");
     } else if (type == ScaleMap::mapType() || type == UniformScaleMap::mapType()) {
         doubles(15);
         for (int a = 0; a < 3; ++a)
-            if (!(v[size_t(a)] != 0)) throw corrupt("a scale is zero");
+            if (!(v[size_t(a)] != 0)) throw corrupt("scale-zero", "a scale is zero");
     } else if (type == ScaleTranslateMap::mapType() || type == UniformScaleTranslateMap::mapType()) {
         doubles(18);
         for (int a = 3; a < 6; ++a)
-            if (!(v[size_t(a)] != 0)) throw corrupt("a scale is zero");
+            if (!(v[size_t(a)] != 0)) throw corrupt("scale-translate-zero", "a scale is zero");
     } else if (type == TranslationMap::mapType()) {
         doubles(3);
     } else if (type == NonlinearFrustumMap::mapType() && !nested) {
         doubles(8); // bounding box, taper, depth
         transform(/*nested=*/true); // the frustum's linear map
     } else {
-        throw corrupt("map type " + quote(type) + " is not an OpenVDB map");
+        throw corrupt("map-type", "map type " + quote(type) + " is not an OpenVDB map");
     }
     for (const double d : v)
-        if (!std::isfinite(d)) throw corrupt("a value is not finite");
+        if (!std::isfinite(d)) throw corrupt("map-not-finite", "a value is not finite");
 }
 
 void Checker::bloscBlock(const std::vector<char>& data, uint64_t bytes, bool boolValues, bool padded)
 {
     const uint64_t n = data.size();
-    if (n < kBloscOverhead) throw corrupt("a blosc block of " + std::to_string(n) + " bytes is shorter than its header");
+    if (n < kBloscOverhead) throw corrupt("blosc-short", "a blosc block of " + std::to_string(n) + " bytes is shorter than its header");
     const auto u8 = [&](int i) { return static_cast<unsigned char>(data[size_t(i)]); };
     const auto u32 = [&](int i) { return uint32_t(u8(i)) | uint32_t(u8(i + 1)) << 8 | uint32_t(u8(i + 2)) << 16 | uint32_t(u8(i + 3)) << 24; };
     const uint32_t flags = u8(2), typesize = u8(3), nbytes = u32(4), blocksize = u32(8), cbytes = u32(12);
     if (cbytes != n)
-        throw corrupt("a blosc block of " + std::to_string(n) + " bytes says it has " + std::to_string(cbytes));
+        throw corrupt("blosc-cbytes", "a blosc block of " + std::to_string(n) + " bytes says it has " + std::to_string(cbytes));
     constexpr uint64_t kPadBytes = 128; // openvdb::compression::BLOSC_PAD_BYTES
     if (padded && bytes <= kPadBytes && nbytes == kPadBytes) bytes = kPadBytes;
     if (nbytes != bytes)
-        throw corrupt("a blosc block claims " + std::to_string(nbytes) + " bytes where " + std::to_string(bytes)
+        throw corrupt("blosc-nbytes", "a blosc block claims " + std::to_string(nbytes) + " bytes where " + std::to_string(bytes)
                       + " are expected");
     if (bytes == 0) return;
     if (typesize == 0 || blocksize == 0 || blocksize > nbytes)
-        throw corrupt("a blosc block has a block size of " + std::to_string(blocksize) + " for "
+        throw corrupt("blosc-blocksize", "a blosc block has a block size of " + std::to_string(blocksize) + " for "
                       + std::to_string(nbytes) + " bytes");
     if ((flags & BLOSC_MEMCPYED) && n != uint64_t(nbytes) + kBloscOverhead)
-        throw corrupt("an uncompressed blosc block of " + std::to_string(n) + " bytes claims " + std::to_string(nbytes));
+        throw corrupt("blosc-memcpyed", "an uncompressed blosc block of " + std::to_string(n) + " bytes claims " + std::to_string(nbytes));
     size_t checkedBytes = 0;
     if (blosc_cbuffer_validate(data.data(), n, &checkedBytes) != 0 || checkedBytes != bytes)
-        throw corrupt("a blosc block has an invalid header");
+        throw corrupt("blosc-header", "a blosc block has an invalid header");
     // Decode into a buffer with a guard zone behind it: the block must fill exactly `bytes`.
     std::vector<unsigned char> out(bytes + kGuardBytes, 0xA5);
     const int got = blosc_decompress_ctx(data.data(), out.data(), bytes, 1);
+    // blosc-overrun is a defence against a decoder bug: blosc 1.21 writes no more than the
+    // destination size it is given, so no file reaches it.
     for (uint64_t i = bytes; i < out.size(); ++i)
-        if (out[i] != 0xA5) throw corrupt("a blosc block decodes past its end");
+        if (out[i] != 0xA5) throw corrupt("blosc-overrun", "a blosc block decodes past its end");
     if (got < 0 || uint64_t(got) != bytes)
-        throw corrupt("a blosc block does not decode to its " + std::to_string(bytes) + " bytes (blosc returned "
+        throw corrupt("blosc-decode", "a blosc block does not decode to its " + std::to_string(bytes) + " bytes (blosc returned "
                       + std::to_string(got) + ")");
     if (boolValues) checkBools(reinterpret_cast<const char*>(out.data()), bytes);
 }
@@ -473,7 +492,7 @@ void Checker::block(uint64_t bytes, bool boolValues, const char* what)
     if (stored <= 0) { // stored uncompressed
         const uint64_t n = uint64_t(0) - uint64_t(stored);
         if (n != bytes)
-            throw corrupt(std::string(what) + " stores " + std::to_string(n) + " uncompressed bytes where "
+            throw corrupt("raw-size", std::string(what) + " stores " + std::to_string(n) + " uncompressed bytes where "
                           + std::to_string(bytes) + " are expected");
         raw();
         return;
@@ -481,10 +500,10 @@ void Checker::block(uint64_t bytes, bool boolValues, const char* what)
     const uint64_t n = uint64_t(stored);
     const uint64_t limit = blosc ? bytes + kBloscOverhead : compressBound(uLong(bytes));
     if (n > limit)
-        throw corrupt(std::string(what) + " claims a " + std::string(blosc ? "blosc" : "zip") + " block of "
+        throw corrupt("block-bound", std::string(what) + " claims a " + std::string(blosc ? "blosc" : "zip") + " block of "
                       + std::to_string(n) + " bytes; " + std::to_string(bytes) + " bytes compress to at most "
                       + std::to_string(limit));
-    if (n > left()) throw truncated(std::string(what) + " is cut short at byte " + std::to_string(mPos));
+    if (n > left()) throw truncated("block-cut-short", std::string(what) + " is cut short at byte " + std::to_string(mPos));
     std::vector<char> data(n);
     read(data.data(), n, what);
     if (blosc) {
@@ -495,7 +514,7 @@ void Checker::block(uint64_t bytes, bool boolValues, const char* what)
     uLongf outBytes = uLongf(bytes);
     const int rc = uncompress(out.data(), &outBytes, reinterpret_cast<const Bytef*>(data.data()), uLong(n));
     if (rc != Z_OK || outBytes != bytes)
-        throw corrupt(std::string("a zip block does not decode to its ") + std::to_string(bytes) + " bytes");
+        throw corrupt("zip-decode", std::string("a zip block does not decode to its ") + std::to_string(bytes) + " bytes");
     if (boolValues) checkBools(reinterpret_cast<const char*>(out.data()), bytes);
 }
 
@@ -504,7 +523,7 @@ void Checker::values(const TreeSpec& spec, uint64_t count, const uint64_t* mask,
     using namespace openvdb::io;
     const int8_t meta = get<int8_t>("a node's compression byte");
     if (meta < NO_MASK_OR_INACTIVE_VALS || meta > NO_MASK_AND_ALL_VALS)
-        throw corrupt(std::string(what) + ": compression byte " + std::to_string(meta) + " is not 0 to 6");
+        throw corrupt("mask-byte", std::string(what) + ": compression byte " + std::to_string(meta) + " is not 0 to 6");
     const int inactive = (meta == NO_MASK_AND_ONE_INACTIVE_VAL || meta == MASK_AND_ONE_INACTIVE_VAL) ? 1
                        : meta == MASK_AND_TWO_INACTIVE_VALS ? 2 : 0;
     for (int i = 0; i < inactive; ++i) {
@@ -535,7 +554,7 @@ void Checker::internal1(const TreeSpec& spec, const openvdb::Coord& origin, VdbG
     read(childMask.data(), sizeof(childMask), "a child mask");
     read(valueMask.data(), sizeof(valueMask), "a value mask");
     for (size_t w = 0; w < childMask.size(); ++w)
-        if (childMask[w] & valueMask[w]) throw corrupt("a slot is marked both child and active value");
+        if (childMask[w] & valueMask[w]) throw corrupt("node1-child-and-value", "a slot is marked both child and active value");
     values(spec, 4096, valueMask.data(), "the node's values");
     for (uint32_t i = 0; i < 4096; ++i) {
         if (!(childMask[i >> 6] >> (i & 63) & 1)) continue;
@@ -543,7 +562,7 @@ void Checker::internal1(const TreeSpec& spec, const openvdb::Coord& origin, VdbG
         Leaf leaf{o, {}};
         if (left() < sizeof(leaf.mask)) {
             const Scope l(*this, "leaf at " + coordString(o));
-            throw truncated("its value mask is cut short at byte " + std::to_string(mPos));
+            throw truncated("leaf-mask-cut-short", "its value mask is cut short at byte " + std::to_string(mPos));
         }
         read(leaf.mask.data(), sizeof(leaf.mask), "a leaf mask");
         mLeaves.push_back(leaf);
@@ -559,7 +578,7 @@ void Checker::internal2(const TreeSpec& spec, const openvdb::Coord& origin, VdbG
     read(childMask.data(), 4096, "a child mask");
     read(valueMask.data(), 4096, "a value mask");
     for (size_t w = 0; w < childMask.size(); ++w)
-        if (childMask[w] & valueMask[w]) throw corrupt("a slot is marked both child and active value");
+        if (childMask[w] & valueMask[w]) throw corrupt("node2-child-and-value", "a slot is marked both child and active value");
     values(spec, 32768, valueMask.data(), "the node's values");
     for (uint32_t i = 0; i < 32768; ++i) {
         if (!(childMask[i >> 6] >> (i & 63) & 1)) continue;
@@ -574,7 +593,7 @@ void Checker::tree(const TreeSpec& spec, VdbGridCheck& g)
     {
         const Scope s(*this, "tree");
         const int32_t buffers = get<int32_t>("the buffer count");
-        if (buffers != 1) throw corrupt("buffer count is " + std::to_string(buffers) + ", not 1");
+        if (buffers != 1) throw corrupt("buffer-count", "buffer count is " + std::to_string(buffers) + ", not 1");
         std::vector<char> bg(spec.valueSize);
         read(bg.data(), spec.valueSize, "the background value");
         if (spec.boolValues) checkBools(bg.data(), bg.size());
@@ -582,7 +601,7 @@ void Checker::tree(const TreeSpec& spec, VdbGridCheck& g)
         const uint32_t numChildren = get<uint32_t>("the child count");
         const uint64_t tileBytes = 12 + spec.valueSize + 1;
         if (uint64_t(numTiles) * tileBytes + uint64_t(numChildren) * (12 + 8192) > left())
-            throw truncated("its root claims " + std::to_string(numTiles) + " tiles and " + std::to_string(numChildren)
+            throw truncated("root-counts", "its root claims " + std::to_string(numTiles) + " tiles and " + std::to_string(numChildren)
                             + " children, more than the file can hold");
         std::set<openvdb::Coord> origins;
         const auto origin = [&](const char* what) {
@@ -590,11 +609,11 @@ void Checker::tree(const TreeSpec& spec, VdbGridCheck& g)
             read(v, sizeof(v), what);
             const openvdb::Coord c(v[0], v[1], v[2]);
             for (int a = 0; a < 3; ++a) {
-                if (v[a] % 4096 != 0) throw corrupt(std::string(what) + " " + coordString(c) + " is not a multiple of 4096");
+                if (v[a] % 4096 != 0) throw corrupt("root-origin-align", std::string(what) + " " + coordString(c) + " is not a multiple of 4096");
                 if (v[a] < -kMaxCoord || v[a] > kMaxCoord)
-                    throw corrupt(std::string(what) + " " + coordString(c) + " lies outside the index range licvdb reads (±2^30)");
+                    throw corrupt("root-origin-range", std::string(what) + " " + coordString(c) + " lies outside the index range licvdb reads (±2^30)");
             }
-            if (!origins.insert(c).second) throw corrupt(std::string(what) + " " + coordString(c) + " appears twice");
+            if (!origins.insert(c).second) throw corrupt("root-origin-twice", std::string(what) + " " + coordString(c) + " appears twice");
             return c;
         };
         std::vector<char> value(spec.valueSize);
@@ -618,7 +637,7 @@ void Checker::leafBuffers(const TreeSpec& spec, VdbGridCheck& g)
         const Scope s(*this, "leaf at " + coordString(leaf.origin));
         std::array<uint64_t, 8> mask{};
         read(mask.data(), sizeof(mask), spec.leaf == LeafKind::Mask ? "a leaf's values" : "a leaf's value mask");
-        if (mask != leaf.mask) throw corrupt("the leaf's value mask differs from the one in the tree's topology");
+        if (mask != leaf.mask) throw corrupt("leaf-mask-differs", "the leaf's value mask differs from the one in the tree's topology");
         for (const uint64_t w : mask) g.leafVoxelsOn += uint64_t(std::popcount(w));
         if (spec.leaf == LeafKind::Plain) {
             values(spec, 512, mask.data(), "the leaf's values");
@@ -627,7 +646,7 @@ void Checker::leafBuffers(const TreeSpec& spec, VdbGridCheck& g)
         int32_t o[3];
         read(o, sizeof(o), "a leaf origin");
         if (openvdb::Coord(o[0], o[1], o[2]) != leaf.origin)
-            throw corrupt("the leaf says its origin is " + coordString(openvdb::Coord(o[0], o[1], o[2])));
+            throw corrupt("leaf-origin", "the leaf says its origin is " + coordString(openvdb::Coord(o[0], o[1], o[2])));
         if (spec.leaf == LeafKind::Bool) skip(64, "a leaf's values");
     }
 }
@@ -644,9 +663,9 @@ VdbCheckResult Checker::run()
         (void)metaMap();
     }
     const int32_t gridCount = get<int32_t>("the grid count");
-    if (gridCount < 0) throw corrupt("the grid count is " + std::to_string(gridCount));
+    if (gridCount < 0) throw corrupt("grid-count-negative", "the grid count is " + std::to_string(gridCount));
     if (uint64_t(gridCount) * 12 > left())
-        throw truncated("it claims " + std::to_string(gridCount) + " grids, more than the file can hold");
+        throw truncated("grid-count", "it claims " + std::to_string(gridCount) + " grids, more than the file can hold");
     const auto& specs = treeSpecs();
     std::map<std::string, size_t> byUniqueName;
     for (int32_t i = 0; i < gridCount; ++i) {
@@ -666,28 +685,28 @@ VdbCheckResult Checker::run()
         const int64_t gridPos = get<int64_t>("the grid offsets");
         const int64_t blockPos = get<int64_t>("the grid offsets");
         const int64_t endPos = get<int64_t>("the grid offsets");
-        if (!byUniqueName.emplace(uniqueName, r.grids.size()).second) throw corrupt("the grid name appears twice");
+        if (!byUniqueName.emplace(uniqueName, r.grids.size()).second) throw corrupt("grid-name-twice", "the grid name appears twice");
         if (!openvdb::GridBase::isRegistered(g.gridType))
-            throw corrupt("grid type " + quote(g.gridType) + " is not an OpenVDB grid type");
+            throw corrupt("grid-type", "grid type " + quote(g.gridType) + " is not an OpenVDB grid type");
         const auto spec = specs.find(g.gridType);
         if (g.instance) {
             const auto parent = byUniqueName.find(g.instanceParent);
             if (parent == byUniqueName.end() || r.grids[parent->second].instance
                 || r.grids[parent->second].gridType != g.gridType)
-                throw corrupt("its instance parent " + quote(openvdb::io::GridDescriptor::nameAsString(g.instanceParent))
+                throw corrupt("instance-parent", "its instance parent " + quote(openvdb::io::GridDescriptor::nameAsString(g.instanceParent))
                               + " is not an earlier grid of the same type");
         }
         if (hasOffsets) {
             if (endPos > int64_t(mSize))
-                throw truncated("grid " + quote(g.name) + " should end at byte " + std::to_string(endPos));
+                throw truncated("grid-end", "grid " + quote(g.name) + " should end at byte " + std::to_string(endPos));
             // An instance has no tree: OpenVDB leaves its block offset 0.
             if (gridPos != int64_t(mPos) || endPos < gridPos || (!g.instance && (blockPos < gridPos || endPos < blockPos)))
-                throw truncated("grid " + quote(g.name) + " has inconsistent offsets");
+                throw truncated("grid-offsets", "grid " + quote(g.name) + " has inconsistent offsets");
         }
         g.compression = get<uint32_t>("the grid's compression flags");
         using namespace openvdb::io;
         if (g.compression & ~uint32_t(COMPRESS_ZIP | COMPRESS_ACTIVE_MASK | COMPRESS_BLOSC))
-            throw corrupt("compression flags " + std::to_string(g.compression) + " are not OpenVDB's");
+            throw corrupt("compression-flags", "compression flags " + std::to_string(g.compression) + " are not OpenVDB's");
         mCompression = g.compression;
         MetaInfo meta;
         {
@@ -702,7 +721,7 @@ VdbCheckResult Checker::run()
         transform();
         if (g.instance) {
             if (hasOffsets && int64_t(mPos) != endPos)
-                throw corrupt("the instance's offsets do not match its contents");
+                throw corrupt("instance-end", "the instance's offsets do not match its contents");
             r.grids.push_back(std::move(g));
             continue;
         }
@@ -711,7 +730,7 @@ VdbCheckResult Checker::run()
                                ? "point grids are not read by licvdb"
                                : "grid type " + g.gridType + " is not read by licvdb";
             if (!hasOffsets)
-                throw lic::InputError(quote(mPath) + " has grid " + quote(g.name) + " of type " + g.gridType
+                throw refusal("streamed-unsupported", quote(mPath) + " has grid " + quote(g.name) + " of type " + g.gridType
                                       + " in a streamed file (no grid offsets), which licvdb cannot skip: "
                                       + g.skipReason);
             seek(uint64_t(endPos));
@@ -721,13 +740,13 @@ VdbCheckResult Checker::run()
         g.valueType = spec->second.valueType;
         tree(spec->second, g);
         if (hasOffsets && int64_t(mPos) != blockPos)
-            throw corrupt("the tree's topology ends at byte " + std::to_string(mPos) + ", its offsets say "
+            throw corrupt("topology-end", "the tree's topology ends at byte " + std::to_string(mPos) + ", its offsets say "
                           + std::to_string(blockPos));
         leafBuffers(spec->second, g);
         if (hasOffsets && int64_t(mPos) != endPos)
-            throw corrupt("the grid's data ends at byte " + std::to_string(mPos) + ", its offsets say " + std::to_string(endPos));
+            throw corrupt("data-end", "the grid's data ends at byte " + std::to_string(mPos) + ", its offsets say " + std::to_string(endPos));
         if (delayedCount >= 0 && uint64_t(delayedCount) != g.leaves)
-            throw corrupt("its delayed-load table lists " + std::to_string(delayedCount) + " leaves; the tree has "
+            throw corrupt("delayed-leaves", "its delayed-load table lists " + std::to_string(delayedCount) + " leaves; the tree has "
                           + std::to_string(g.leaves));
         const TreeSpec& ts = spec->second;
         r.memoryBytes += g.leaves * ts.memLeaf + (g.internalNodes - mInternal2) * ts.memInternal1
@@ -739,26 +758,43 @@ VdbCheckResult Checker::run()
 
 } // namespace
 
+std::string vdbCheckRule(const std::string& message)
+{
+    const auto at = message.find(kVdbCheckMarker);
+    if (at == std::string::npos) return "";
+    const auto from = at + kVdbCheckMarker.size(), to = message.find(']', from);
+    return to == std::string::npos ? "" : message.substr(from, to - from);
+}
+
+uint64_t readMemoryLimitBytes()
+{
+    if (const char* env = std::getenv("LICVDB_READ_MEMORY_MB")) {
+        char* end = nullptr;
+        const double mb = std::strtod(env, &end);
+        if (end != env && mb > 0) return uint64_t(mb * 1048576.0);
+    }
+    const long pages = ::sysconf(_SC_PHYS_PAGES), pageSize = ::sysconf(_SC_PAGESIZE);
+    return pages > 0 && pageSize > 0 ? uint64_t(0.8 * double(pages) * double(pageSize)) : 0;
+}
+
 VdbCheckResult checkVdbStructure(const std::string& path)
 {
     openvdb::initialize();
     struct stat st{};
-    if (path.empty()) throw lic::InputError("no .vdb file given; expected a path to a .vdb file");
+    if (path.empty()) throw refusal("no-path", "no .vdb file given; expected a path to a .vdb file");
     if (::stat(path.c_str(), &st) != 0)
-        throw lic::InputError("file " + quote(path) + " not found; expected a .vdb file");
-    if (S_ISDIR(st.st_mode)) throw lic::InputError(quote(path) + " is a directory; expected a .vdb file");
+        throw refusal("not-found", "file " + quote(path) + " not found; expected a .vdb file");
+    if (S_ISDIR(st.st_mode)) throw refusal("directory", quote(path) + " is a directory; expected a .vdb file");
     if (S_ISREG(st.st_mode) && st.st_size == 0)
-        throw lic::InputError("file " + quote(path) + " is empty (0 bytes); expected a .vdb file");
+        throw refusal("empty", "file " + quote(path) + " is empty (0 bytes); expected a .vdb file");
     Checker checker(path);
     VdbCheckResult r = checker.run();
-    const long pages = ::sysconf(_SC_PHYS_PAGES), pageSize = ::sysconf(_SC_PAGESIZE);
-    if (pages > 0 && pageSize > 0) {
-        const double ram = double(pages) * double(pageSize);
-        if (double(r.memoryBytes) > 0.8 * ram)
-            throw lic::InputError(quote(path) + " would need about " + std::to_string(r.memoryBytes >> 20)
-                                  + " MiB of memory to read, more than this machine has ("
-                                  + std::to_string(uint64_t(ram) >> 20) + " MiB); refused as too large or corrupt");
-    }
+    const uint64_t limit = readMemoryLimitBytes();
+    if (limit > 0 && r.memoryBytes > limit)
+        throw refusal("memory", quote(path) + " would need about " + std::to_string(r.memoryBytes >> 20)
+                                    + " MiB of memory to read, more than the " + std::to_string(limit >> 20)
+                                    + " MiB allowed (80 % of this machine's memory, or LICVDB_READ_MEMORY_MB)"
+                                      "; refused as too large or corrupt");
     return r;
 }
 

@@ -4,9 +4,24 @@
 
 #include <cstdint>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace vdbexport {
+
+/// @brief How every refusal by checkVdbStructure (layer 1) begins: the marker, the name of the
+///        rule that refused the file, "] ", then the message, e.g.
+///        `[vdb-check blosc-nbytes] 'f.vdb' is corrupt: grid 'vel', leaf at (0, 8, 0): a blosc
+///        block claims 8182 bytes where 6144 are expected (at byte 1234); expected an intact
+///        OpenVDB .vdb file`. OpenVDB's own read errors (`cannot read 'f.vdb' (…): …`,
+///        `cannot open 'f.vdb' as a .vdb file: …`) and the isolated read's (`reading 'f.vdb'
+///        crashed OpenVDB's reader …`, `… did not finish within …`) never begin with it. The rule
+///        names are listed in docs/inputs.md.
+inline constexpr std::string_view kVdbCheckMarker = "[vdb-check ";
+
+/// The name of the rule in a layer-1 refusal message (where the marker first appears in
+/// `message`, e.g. after `licvdb bake: error: `), or "" if `message` has no marker.
+std::string vdbCheckRule(const std::string& message);
 
 /// What the structural check found in one grid of a .vdb file.
 struct VdbGridCheck
@@ -50,12 +65,18 @@ struct VdbCheckResult
 /// zip or blosc block: its header sizes must match, and it is decoded into a guarded scratch
 /// buffer that must come out exactly full). Grid types licvdb does not read (point grids) have
 /// their metadata and transform checked and their tree skipped (VdbGridCheck::skipReason).
-/// Memory: refuses a file whose grids would need more memory than this machine has.
+/// Memory: refuses a file whose grids would need more than readMemoryLimitBytes().
 /// @param path  the .vdb file
 /// @return what was found (grids in file order)
-/// @throw lic::InputError naming `path`, where in the file (grid, node origin, byte offset) and
-///        what is wrong: not a VDB file, truncated, unsupported format version, or corrupt.
+/// @throw lic::InputError beginning with kVdbCheckMarker and the rule's name, naming `path`,
+///        where in the file (grid, node origin, byte offset) and what is wrong: not a VDB file,
+///        truncated, unsupported format version, corrupt, or too large.
 VdbCheckResult checkVdbStructure(const std::string& path);
+
+/// @brief The memory a file's grids may need for checkVdbStructure to pass it, in bytes: 80 % of
+///        this machine's physical memory, or $LICVDB_READ_MEMORY_MB MiB if set (> 0); 0 (no
+///        limit) if neither is known.
+uint64_t readMemoryLimitBytes();
 
 /// @brief Layer 2: read every grid of `path` with OpenVDB in a separate process (`licvdb info
 ///        --check`, see setReadIsolation), so that a file that crashes or hangs OpenVDB takes down
