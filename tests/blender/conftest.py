@@ -27,6 +27,7 @@ def pytest_configure(config):
                                        "controls.smoke_simulation shows this Blender aborts on any)")
 
 
+@pytest.hookimpl(trylast=True)  # after -k/-m deselection: controls run only for tests that run
 def pytest_collection_modifyitems(config, items):
     """A test that needs what this build cannot do (its control, run once without the add-on, says
     so) is a strict expected failure with the control's finding as the reason: it still runs, a

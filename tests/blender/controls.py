@@ -82,9 +82,11 @@ def _aborted(proc) -> bool:
 
 _cache: dict = {}
 
-# A 16³ block of density 1 (voxel 1/16: world [0, 1]³) written with OpenVDB's Python module
-# (pyopenvdb before OpenVDB 12, openvdb since), read by a plain volume object with an emission
-# shader from the density attribute, rendered 32² from above with Cycles on the CPU.
+# A 16³ block of density 0.5 – 1 (voxel 1/16: world [0, 1]³) written with OpenVDB's Python
+# module (pyopenvdb before OpenVDB 12, openvdb since), read by a plain volume object with an
+# emission shader from the density attribute, rendered 32² from above with Cycles on the CPU.
+# The values vary from voxel to voxel: OpenVDB stores a constant block as tiles, which Blender 3.4
+# renders as empty (docs/blender.md).
 RENDER_SCRIPT = """
     import json, os, sys
     import bpy, numpy as np
@@ -94,7 +96,9 @@ RENDER_SCRIPT = """
     except ImportError:
         import openvdb as vdb
     g = vdb.FloatGrid()
-    g.copyFromArray(np.ones((16, 16, 16), np.float32), ijk=(0, 0, 0), tolerance=0.0)
+    i = np.arange(16, dtype=np.float32)
+    block = 0.5 + 0.5 * ((i[:, None, None] + i[None, :, None] + i[None, None, :]) % 2)
+    g.copyFromArray(block.astype(np.float32), ijk=(0, 0, 0), tolerance=0.0)
     g.transform = vdb.createLinearTransform(voxelSize=1.0 / 16)
     g.name = "density"
     g.gridClass = vdb.GridClass.FOG_VOLUME
