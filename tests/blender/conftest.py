@@ -4,6 +4,7 @@ builds that a control shows cannot do what a test needs (controls.py)."""
 import json
 import os
 import subprocess
+import warnings
 
 import addon_utils
 import bpy
@@ -25,6 +26,8 @@ def pytest_configure(config):
                                        "controls.vdb_render shows this Blender renders none)")
     config.addinivalue_line("markers", "smoke: runs a smoke simulation (an expected failure where "
                                        "controls.smoke_simulation shows this Blender aborts on any)")
+    config.addinivalue_line("markers", "older_branch: forces a compat branch of an older Blender on purpose "
+                                       "(its deprecation warnings are expected)")
 
 
 @pytest.hookimpl(trylast=True)  # after -k/-m deselection: controls run only for tests that run
@@ -62,6 +65,25 @@ def enable_addon():
     if ADDON not in bpy.context.preferences.addons:
         addon_utils.enable(ADDON, default_set=True, handle_error=None)
     assert ADDON in bpy.context.preferences.addons, "the licvdb add-on did not enable"
+
+
+ADDON_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                         "blender_addon", "licvdb")
+
+
+@pytest.fixture(autouse=True)
+def no_deprecated_api_from_the_addon(request):
+    """The add-on uses no Blender API that this Blender deprecates (5.x: ``use_nodes``): a
+    DeprecationWarning raised from the add-on's code fails the test, except in tests that force
+    an older version's branch on purpose (``@pytest.mark.older_branch``)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    if request.node.get_closest_marker("older_branch"):
+        return
+    ours = [f"{os.path.basename(w.filename)}:{w.lineno}: {w.message}" for w in caught
+            if issubclass(w.category, DeprecationWarning) and os.path.abspath(w.filename).startswith(ADDON_DIR)]
+    assert not ours, f"the add-on uses API this Blender deprecates: {ours}"
 
 
 @pytest.fixture(autouse=True)

@@ -139,6 +139,10 @@ RENDER_SCRIPT = """
     scene.camera = cam
     scene.world = bpy.data.worlds.new("black")
     scene.world.color = (0, 0, 0)
+    if scene.world.node_tree is not None:  # 5.x: every new world has a grey Background node
+        for n in scene.world.node_tree.nodes:
+            if n.bl_idname == "ShaderNodeBackground":
+                n.inputs["Strength"].default_value = 0.0
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
     scene.cycles.samples = 4
@@ -168,7 +172,7 @@ def vdb_render() -> Control:
         octrees = next((l.strip() for l in (proc.stdout + proc.stderr).splitlines() if "volume octree" in l), "")
         works = lum["inside"] > 0.2 and lum["outside"] < 0.05
         finding = (f"a plain volume object reading a .vdb written by OpenVDB's Python module (no add-on, no "
-                   f"licvdb) renders {'as expected' if works else 'black'} in Cycles (mean luminance "
+                   f"licvdb) renders {'as expected' if works else 'as nothing'} in Cycles (mean luminance "
                    f"{lum['inside']:.3f} over the volume, {lum['outside']:.3f} outside"
                    f"{'; ' + octrees if octrees else ''})")
         if not works:

@@ -62,6 +62,7 @@ def use_nodes_warnings(caught):
     return [str(w.message) for w in caught if "use_nodes" in str(w.message)]
 
 
+@pytest.mark.older_branch
 @pytest.mark.parametrize("deprecated", [False, True], ids=["before-5.0", "5.0"])
 def test_ensure_node_tree_creates_a_missing_tree(monkeypatch, deprecated):
     monkeypatch.setattr(compat, "node_use_nodes_deprecated", lambda: deprecated)
@@ -78,6 +79,7 @@ def test_ensure_node_tree_creates_a_missing_tree(monkeypatch, deprecated):
         assert tree is not None and tree == idblock.node_tree and len(tree.nodes) > 0
 
 
+@pytest.mark.older_branch
 def test_ensure_node_tree_before_5_0_turns_nodes_on(monkeypatch):
     """Before 5.0 a material whose nodes are off renders without its tree: turn them on."""
     monkeypatch.setattr(compat, "node_use_nodes_deprecated", lambda: False)
