@@ -27,6 +27,32 @@ add_custom_command(OUTPUT ${_licvdb_addon_zips}
                    DEPENDS ${_licvdb_addon_files} ${PROJECT_SOURCE_DIR}/scripts/package-addon
                    COMMENT "Zipping the Blender add-on (scripts/package-addon)" VERBATIM)
 add_custom_target(licvdb_addon_zips ALL DEPENDS ${_licvdb_addon_zips})
+# A build of only some targets (scripts/demo: --target licvdb) has no zips, or old ones: install
+# makes them first where they are missing or older than the add-on's files, so that
+# `cmake --install` works after any build.
+install(CODE "
+  set(_zips \"${_licvdb_addon_zips}\")
+  set(_sources \"${_licvdb_addon_files};${PROJECT_SOURCE_DIR}/scripts/package-addon\")
+  set(_stale FALSE)
+  foreach(_zip IN LISTS _zips)
+    if(NOT EXISTS \"\${_zip}\")
+      set(_stale TRUE)
+    endif()
+    foreach(_src IN LISTS _sources)
+      if(\"\${_src}\" IS_NEWER_THAN \"\${_zip}\")
+        set(_stale TRUE)
+      endif()
+    endforeach()
+  endforeach()
+  if(_stale)
+    message(STATUS \"Zipping the Blender add-on (scripts/package-addon ${_licvdb_addon_dir})\")
+    execute_process(COMMAND \"${PROJECT_SOURCE_DIR}/scripts/package-addon\" \"${_licvdb_addon_dir}\"
+                    RESULT_VARIABLE _rc OUTPUT_QUIET)
+    if(NOT _rc EQUAL 0)
+      message(FATAL_ERROR \"scripts/package-addon failed (\${_rc}): the add-on zips cannot be installed\")
+    endif()
+  endif()
+" COMPONENT runtime)
 install(FILES ${_licvdb_addon_zips} DESTINATION ${CMAKE_INSTALL_DATADIR}/licvdb/blender COMPONENT runtime)
 install(FILES ${PROJECT_SOURCE_DIR}/README.md DESTINATION ${CMAKE_INSTALL_DOCDIR} COMPONENT runtime)
 

@@ -13,12 +13,21 @@ What each guard is for, and where the facts come from, is in docs/blender.md, "B
 - ``has_volume_biased(scene)``: Cycles 5.0 renders volumes with null scattering by default and
   uses ``volume_step_rate`` / ``volume_max_steps`` only with ``scene.cycles.volume_biased`` on (ray
   marching, the only algorithm before 5.0). The property's presence is the test, not a version.
+- ``cycles_draws_voxels_half_off()``: Cycles before 5.0 built without NanoVDB (distribution
+  builds such as Debian's 3.4.1 and 4.3.2) renders a grid as a dense texture and draws OpenVDB
+  voxel i over [i, i + 1] instead of centred on i; with NanoVDB (official builds) it samples voxel
+  centres. Cycles 5.x loads grids only through NanoVDB (a build without it renders no volume),
+  so there it is never half a voxel off. Measured by renders in 3.4.1 and 4.3.2
+  (tests/blender/test_render.py); docs/blender.md, "Placement".
 """
 
 import bpy
 
 #: First Blender version in which ``Material.use_nodes`` / ``World.use_nodes`` are deprecated.
 USE_NODES_DEPRECATED_IN = (5, 0, 0)
+
+#: First Blender version whose Cycles reads volume grids only through NanoVDB (no dense textures).
+CYCLES_NANOVDB_ONLY_IN = (5, 0, 0)
 
 
 def node_use_nodes_deprecated() -> bool:
@@ -56,3 +65,15 @@ def has_volume_biased(scene) -> bool:
 def volume_step_rate_ignored(scene) -> bool:
     """True where Cycles would ignore ``volume_step_rate``: it has the Biased option and it is off."""
     return has_volume_biased(scene) and not scene.cycles.volume_biased
+
+
+def is_distribution_build() -> bool:
+    """True for a Blender built by a distribution (no build hash: Debian's), whose Cycles is taken
+    to lack NanoVDB; official builds report their git hash and have NanoVDB."""
+    return bpy.app.build_hash in (b"Unknown", b"unknown", b"")
+
+
+def cycles_draws_voxels_half_off() -> bool:
+    """True where Cycles draws OpenVDB voxel i over [i, i + 1] (its dense-texture path: before 5.0,
+    without NanoVDB, taken to be a distribution build), so imports shift by −½ voxel."""
+    return bpy.app.version < CYCLES_NANOVDB_ONLY_IN and is_distribution_build()

@@ -5,6 +5,8 @@ import shutil
 
 import bpy
 
+from . import compat
+
 #: Install folders tried after PATH: Blender started from a desktop launcher (or macOS's Finder)
 #: may not have them on PATH. ``cmake --install`` defaults to /usr/local; ~/.local/bin is the usual
 #: per-user prefix.
@@ -71,14 +73,15 @@ def find_executable(context=None) -> str | None:
 
 def half_voxel_shift(context=None) -> bool:
     """Whether imports shift bakes by −½ voxel so Cycles renders voxel centres where OpenVDB puts
-    them. Cycles' dense-texture path (builds without NanoVDB) maps texel t to index [t, t+1], so
-    voxel i is drawn centred at i + ½ (measured on Debian's Blender 3.4.1: lines render half a
-    voxel off without the shift, centred with it); its NanoVDB path samples at voxel centres."""
+    them. Cycles' dense-texture path (builds without NanoVDB, before 5.0) maps texel t to index
+    [t, t+1], so voxel i is drawn centred at i + ½ (measured on Debian's Blender 3.4.1 and 4.3.2:
+    lines render half a voxel off without the shift, centred with it); its NanoVDB path (official
+    builds, and every 5.x) samples at voxel centres (compat.cycles_draws_voxels_half_off)."""
     prefs = _addon_prefs(context)
     mode = prefs.half_voxel if prefs else "AUTO"
     if mode != "AUTO":
         return mode == "ON"
-    return bpy.app.build_hash in (b"Unknown", b"unknown", b"")
+    return compat.cycles_draws_voxels_half_off()
 
 
 def missing_executable_message(context=None) -> str:
@@ -101,9 +104,11 @@ class LICVDB_AddonPreferences(bpy.types.AddonPreferences):
 
     half_voxel: bpy.props.EnumProperty(
         name="Half-voxel shift",
-        description="Cycles builds without NanoVDB (e.g. Debian's Blender 3.4) render OpenVDB voxel (i, j, k) "
-                    "half a voxel off its centre; imports shift the object back by half a voxel to compensate",
-        items=[("AUTO", "Auto", "Shift on distribution builds (no build hash, no NanoVDB), not on official builds"),
+        description="Cycles before 5.0 built without NanoVDB (e.g. Debian's Blender 3.4 and 4.3) renders OpenVDB "
+                    "voxel (i, j, k) half a voxel off its centre; imports shift the object back by half a voxel "
+                    "to compensate",
+        items=[("AUTO", "Auto", "Shift on distribution builds (no build hash, no NanoVDB) before 5.0; not on "
+                                "official builds nor in 5.0+ (NanoVDB only)"),
                ("ON", "On", "Always shift by −½ voxel"),
                ("OFF", "Off", "Never shift")],
         default="AUTO",

@@ -1,14 +1,51 @@
-"""Fixtures for the tests that run inside Blender (see run.py)."""
+"""Fixtures for the tests that run inside Blender (see run.py), and the expected failures of
+builds that a control shows cannot do what a test needs (controls.py)."""
 
 import json
 import os
 import subprocess
+import warnings
 
 import addon_utils
 import bpy
 import pytest
 
+import controls
+
 ADDON = "licvdb"
+
+#: marker → (control, the exception a test fails with where the control shows the build lacks it)
+CAPABILITIES = {
+    "renders": (controls.vdb_render, AssertionError),
+    "smoke": (controls.smoke_simulation, controls.BlenderAborted),
+}
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "renders: renders a .vdb volume in Cycles (an expected failure where "
+                                       "controls.vdb_render shows this Blender renders none)")
+    config.addinivalue_line("markers", "smoke: runs a smoke simulation (an expected failure where "
+                                       "controls.smoke_simulation shows this Blender aborts on any)")
+    config.addinivalue_line("markers", "older_branch: forces a compat branch of an older Blender on purpose "
+                                       "(its deprecation warnings are expected)")
+
+
+@pytest.hookimpl(trylast=True)  # after -k/-m deselection: controls run only for tests that run
+def pytest_collection_modifyitems(config, items):
+    """A test that needs what this build cannot do (its control, run once without the add-on, says
+    so) is a strict expected failure with the control's finding as the reason: it still runs, a
+    pass fails the run (XPASS strict), and so does a failure of another kind than ``raises``."""
+    for item in items:  # every test with a simulated smoke domain (test_fluid's fixture) needs smoke
+        if "smoke" in getattr(item, "fixturenames", ()) and not item.get_closest_marker("smoke"):
+            item.add_marker(pytest.mark.smoke)
+    for marker, (control, raises) in CAPABILITIES.items():
+        marked = [item for item in items if item.get_closest_marker(marker)]
+        if not marked:
+            continue
+        found = control()
+        if not found.works:
+            for item in marked:
+                item.add_marker(pytest.mark.xfail(reason=found.reason, strict=True, raises=raises))
 
 
 def licvdb_exe() -> str:
@@ -28,6 +65,25 @@ def enable_addon():
     if ADDON not in bpy.context.preferences.addons:
         addon_utils.enable(ADDON, default_set=True, handle_error=None)
     assert ADDON in bpy.context.preferences.addons, "the licvdb add-on did not enable"
+
+
+ADDON_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                         "blender_addon", "licvdb")
+
+
+@pytest.fixture(autouse=True)
+def no_deprecated_api_from_the_addon(request):
+    """The add-on uses no Blender API that this Blender deprecates (5.x: ``use_nodes``): a
+    DeprecationWarning raised from the add-on's code fails the test, except in tests that force
+    an older version's branch on purpose (``@pytest.mark.older_branch``)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    if request.node.get_closest_marker("older_branch"):
+        return
+    ours = [f"{os.path.basename(w.filename)}:{w.lineno}: {w.message}" for w in caught
+            if issubclass(w.category, DeprecationWarning) and os.path.abspath(w.filename).startswith(ADDON_DIR)]
+    assert not ours, f"the add-on uses API this Blender deprecates: {ours}"
 
 
 @pytest.fixture(autouse=True)

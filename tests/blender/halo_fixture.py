@@ -1,6 +1,7 @@
 """A synthetic halo bake: two thin lines crossing at different depths, each in a wider halo.
 
-Written with pyopenvdb (Blender's Python is the system Python here) in licvdb's output format:
+Written with OpenVDB's Python module (pyopenvdb, or openvdb since OpenVDB 12: controls.vdb_module;
+Blender's Python is the system Python in Debian's builds) in licvdb's output format:
 FOG_VOLUME float grids ``density`` and ``halo`` in [0, 1], halo ≥ density, leaf voxels only (no
 tiles: Blender 3.4 renders tiles as empty), plus the sidecar manifest licvdb writes.
 
@@ -43,7 +44,9 @@ def volumes():
 
 def write(directory, name="crossing"):
     """Write NAME.vdb + NAME.licvdb.json into ``directory``; returns the .vdb path."""
-    import pyopenvdb as vdb
+    from controls import vdb_module
+
+    vdb = vdb_module()
 
     density, halo = volumes()
     assert (halo >= density).all()

@@ -5,6 +5,7 @@ import json
 
 import bpy
 import numpy as np
+import pytest
 from mathutils import Matrix, Vector
 
 import halo_fixture as hf
@@ -67,6 +68,7 @@ def gap_ratio(lum, cam):
     return b_at(2.5 * v) / b_at(10 * v)
 
 
+@pytest.mark.renders
 def test_blender_matches_reference_raycaster(tmp_path):
     crossing = hf.write(tmp_path)
     # Scene-linear EXR from both renderers: no display transform in the comparison.

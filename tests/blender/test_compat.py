@@ -1,14 +1,16 @@
 """Blender-version guards (licvdb/compat.py) and the 4.x/5.0 changes behind them (issue 17).
 
-Each guard's branches run here in Blender 3.4 by forcing the predicate with monkeypatch; a
-branch that needs an API this Blender lacks runs against a stand-in property of the same name
-and type (registered in the test, removed after it). What these tests cannot show about 4.2,
-4.5 and 5.0 themselves is listed in docs/blender.md, "Blender versions".
+Each guard's branches run in every Blender by forcing the predicate with monkeypatch; a branch
+that needs an API this Blender lacks runs against a stand-in property of the same name and type
+(registered in the test, removed after it). Where this Blender has the real thing (5.2.2:
+``volume_biased``, node trees on new materials, deprecated ``use_nodes``), the test checks the
+real thing. docs/blender.md, "Tested versions", lists what ran in 3.4.1, 4.3.2 and 5.2.2.
 """
 
 import ast
 import os
 import re
+import warnings
 
 import bpy
 import pytest
@@ -51,15 +53,33 @@ def test_use_nodes_guard_matches_this_blender():
     assert compat.node_use_nodes_deprecated() == (bpy.app.version >= (5, 0, 0))
 
 
+#: Blender 5.0+ gives every new material and world a node tree, deprecates use_nodes (reading or
+#: writing it warns) and always renders the tree (measured in 5.2.2; 3.4.1 and 4.3.2 do neither).
+REAL_5 = bpy.app.version >= (5, 0, 0)
+
+
+def use_nodes_warnings(caught):
+    return [str(w.message) for w in caught if "use_nodes" in str(w.message)]
+
+
+@pytest.mark.older_branch
 @pytest.mark.parametrize("deprecated", [False, True], ids=["before-5.0", "5.0"])
 def test_ensure_node_tree_creates_a_missing_tree(monkeypatch, deprecated):
     monkeypatch.setattr(compat, "node_use_nodes_deprecated", lambda: deprecated)
     for idblock in (bpy.data.materials.new("m"), bpy.data.worlds.new("w")):
-        assert idblock.node_tree is None  # (3.4 creates no tree with a new material or world)
+        if REAL_5:
+            # 5.0+ creates the tree with the data-block: there is none to create; it is kept.
+            before = idblock.node_tree
+            assert before is not None
+            tree = compat.ensure_node_tree(idblock)
+            assert tree == before and tree == idblock.node_tree and len(tree.nodes) > 0
+            continue
+        assert idblock.node_tree is None  # (3.4 and 4.3 create no tree with a new material or world)
         tree = compat.ensure_node_tree(idblock)
         assert tree is not None and tree == idblock.node_tree and len(tree.nodes) > 0
 
 
+@pytest.mark.older_branch
 def test_ensure_node_tree_before_5_0_turns_nodes_on(monkeypatch):
     """Before 5.0 a material whose nodes are off renders without its tree: turn them on."""
     monkeypatch.setattr(compat, "node_use_nodes_deprecated", lambda: False)
@@ -72,26 +92,34 @@ def test_ensure_node_tree_before_5_0_turns_nodes_on(monkeypatch):
 
 
 def test_ensure_node_tree_5_0_leaves_use_nodes_alone(monkeypatch):
-    """5.0: nodes are always on and writing use_nodes warns: a material with a tree is not
-    written. (Here in 3.4 the untouched flag stays False, which shows nothing wrote it.)"""
+    """5.0: nodes are always on and reading or writing use_nodes warns: a material with a tree is
+    neither written nor read. Before 5.0 (where the branch is forced) the untouched flag stays
+    False, which shows nothing wrote it; in 5.0+ (the real branch) no use_nodes deprecation
+    warning is raised, which shows nothing read or wrote it."""
     monkeypatch.setattr(compat, "node_use_nodes_deprecated", lambda: True)
     mat = bpy.data.materials.new("m")
-    mat.use_nodes = True
-    mat.use_nodes = False
-    compat.ensure_node_tree(mat)
-    assert mat.use_nodes is False
-    # The material builder goes through the same guard: it builds the tree and leaves the flag.
-    nodes = material.build_lic_material(mat, ["density"], material.Look())
-    assert nodes["emission"].name in mat.node_tree.nodes and mat.use_nodes is False
-    # And so does the world in setup_render.
     world = bpy.data.worlds.new("w")
-    world.use_nodes = True
-    world.use_nodes = False
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)  # (setting up warns in 5.0+, not the add-on)
+        for idblock in (mat, world):
+            idblock.use_nodes = True
+            idblock.use_nodes = False
     bpy.context.scene.world = world
-    material.setup_render(bpy.context.scene)
-    assert world.use_nodes is False
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        compat.ensure_node_tree(mat)
+        # The material builder goes through the same guard: it builds the tree and leaves the flag.
+        nodes = material.build_lic_material(mat, ["density"], material.Look())
+        # And so does the world in setup_render.
+        material.setup_render(bpy.context.scene)
+    assert nodes["emission"].name in mat.node_tree.nodes
     bg = world.node_tree.nodes["Background"]
     assert tuple(bg.inputs["Color"].default_value)[:3] == (0.0, 0.0, 0.0)
+    if REAL_5:
+        assert use_nodes_warnings(caught) == [], use_nodes_warnings(caught)
+    else:
+        assert mat.use_nodes is False
+        assert world.use_nodes is False
 
 
 def test_setup_render_without_a_world(monkeypatch):
@@ -131,14 +159,19 @@ def test_volume_biased_guard_follows_the_property():
     assert compat.has_volume_biased(scene) == ("volume_biased" in scene.cycles.bl_rna.properties)
 
 
-def test_setup_render_without_volume_biased(bakes):
-    """Blender before 5.0 (this one): ray marching is the only volume algorithm; the step rate
-    is set and nothing else is needed."""
+def test_setup_render_with_this_blenders_volume_settings(bakes):
+    """Before 5.0 (3.4.1, 4.3.2): ray marching is the only volume algorithm; the step rate is set
+    and nothing else is needed. 5.0+ (5.2.2): the real Biased option exists, off by default, and
+    setup_render turns it on."""
     scene = bpy.context.scene
-    assert not compat.has_volume_biased(scene), "this Blender has volume_biased: see the stand-in test"
+    assert compat.has_volume_biased(scene) == REAL_5, "volume_biased exists exactly in 5.0+"
+    if REAL_5:
+        assert scene.cycles.volume_biased is False  # 5.0's default: null scattering
     material.setup_render(scene)
     assert scene.cycles.volume_step_rate == pytest.approx(0.5)
     assert scene.cycles.volume_max_steps >= 1024
+    if REAL_5:
+        assert scene.cycles.volume_biased is True
     import_still(bakes)
     log = draw_panel(bpy.types.LICVDB_PT_look, bpy.context)
     assert not any(kind == "label" and "step rate" in text for kind, text in log)

@@ -10,6 +10,8 @@ import pytest
 from mathutils import Matrix, Vector
 
 from conftest import licvdb_exe, run_licvdb
+import controls
+from controls import vdb_module
 from licvdb import ops_bake, ops_import
 
 RES = 16
@@ -57,6 +59,14 @@ def make_smoke(cache_dir):
 
 @pytest.fixture
 def smoke(tmp_path):
+    """The smoke domain of make_smoke, simulated. Where the smoke control shows that this Blender
+    aborts on any smoke simulation (conftest.py has then made the test an expected failure), the
+    simulation runs in a child Blender instead, whose abort is the test's expected failure; here
+    it would end the whole run."""
+    if not controls.smoke_simulation().works:
+        controls.run_smoke(tmp_path / "cache")
+        pytest.fail("the smoke control says this Blender aborts on any smoke simulation, but the test's "
+                    "simulation ran in a child Blender: the control is wrong")
     dom = make_smoke(tmp_path / "cache")
     s = bpy.context.scene.licvdb_bake
     s.length = 6.0
@@ -69,7 +79,7 @@ def smoke(tmp_path):
 def test_cache_velocity_grid_is_readable(smoke):
     """What mantaflow writes in Blender 3.4: a vec3s `velocity` grid of class staggered, stored as
     half floats, active where there is smoke; licvdb reads it."""
-    import pyopenvdb as vdb
+    vdb = vdb_module()
 
     path = ops_bake.cache_data_file(ops_bake.fluid_domain(smoke), 3)
     meta = {g.name: g for g in vdb.readAllGridMetadata(path)}
@@ -85,7 +95,7 @@ def test_cache_velocity_grid_is_readable(smoke):
 def test_placement_of_cache_coordinates(smoke):
     """domain_placement puts the cache's density where the emitter is (mantaflow writes cell i at
     i × cell, Blender's cell i covers [lower + i·cell, lower + (i+1)·cell])."""
-    import pyopenvdb as vdb
+    vdb = vdb_module()
 
     ds = ops_bake.fluid_domain(smoke)
     g = vdb.read(ops_bake.cache_data_file(ds, 1), "density")
@@ -149,7 +159,7 @@ def test_bake_fluid_frame_range_is_a_sequence(smoke):
     assert grids.frame == 3 and grids.frame_filepath.endswith("_0003.vdb")
     assert grids.is_loaded or grids.load()
     # One coherent unsteady bake (the texture carried by the smoke), not three separate stills.
-    import pyopenvdb as vdb
+    vdb = vdb_module()
     meta = {g.name: g for g in vdb.readAllGridMetadata(grids.frame_filepath)}["density"]
     assert meta["lic_unsteady"] is True and meta["lic_cyclic"] is False
     assert meta["lic_frame"] == 3 and meta["lic_first_frame"] == 2 and meta["lic_frames"] == 3
@@ -161,7 +171,7 @@ def test_bake_fluid_frame_range_is_a_sequence(smoke):
 def test_bake_fluid_cached_range_is_one_coherent_sequence(smoke):
     """By default a frame range is the domain's cache range (1-4 here), baked as one sequence whose
     texture is carried by the smoke: consecutive frames are alike, but not identical."""
-    import pyopenvdb as vdb
+    vdb = vdb_module()
     s = bpy.context.scene.licvdb_bake
     s.use_frame_range = True
     s.color_scalar = "NONE"

@@ -7,6 +7,7 @@ import bpy
 import pytest
 from mathutils import Vector
 
+import placement
 from conftest import run_licvdb
 from licvdb import manifest as mf
 from licvdb import ops_import
@@ -171,20 +172,27 @@ def world_bounds(obj):
 def test_placement_matches_field_bbox(bakes):
     """The imported bake lines up with the field's world bounding box.
 
-    Blender's bound box of a volume spans the centres of the outermost active voxels; licvdb's
-    world_bbox spans their outer faces (centres ± ½ voxel). Cycles without NanoVDB (Debian's
-    build) draws voxel i over [i, i + 1] instead of [i − ½, i + ½], so the add-on moves the
-    object by −½ voxel there (test_render checks the rendered lines are centred); the cells
-    Cycles renders are then the bound box's centres −½ … +½ voxel, shifted by +½."""
+    licvdb's world_bbox spans the outermost voxels' outer faces (centres ± ½ voxel). What
+    Blender's bound box of a volume spans, and where Cycles draws a voxel, depend on the version
+    (placement.py, measured): the bound box spans voxel centres in 3.4.1 and 4.3.2 and outer
+    faces in 5.2.2; Cycles without NanoVDB before 5.0 (Debian's 3.4.1 and 4.3.2) draws voxel i
+    over [i, i + 1] instead of [i − ½, i + ½], so the add-on moves the object by −½ voxel
+    there (test_render checks the rendered lines are centred). The cells Cycles renders must
+    then cover the manifest's world_bbox exactly."""
     obj = import_one(bakes["still"])
     lo, hi = world_bounds(obj)
     half = 0.5 * obj.licvdb.voxel_size
-    shift = half if obj.licvdb.half_voxel_shift else 0.0
-    assert obj.licvdb.half_voxel_shift == (bpy.app.build_hash in (b"Unknown", b"unknown", b""))
-    rendered_lo = [v - half + shift for v in lo]
-    rendered_hi = [v + half + shift for v in hi]
+    assert obj.licvdb.half_voxel_shift == placement.expected_half_voxel_shift()
+    # The bound box itself, as this version defines it: centres (± ½ voxel for faces) of the
+    # manifest's voxels, plus the object's shift.
+    shift = -half if obj.licvdb.half_voxel_shift else 0.0
     man = mf.read_manifest(mf.manifest_path(str(bakes["still"])))
     mlo, mhi = man.grid("density").world_bbox
+    clo, chi = placement.centres_box(lo, hi, obj.licvdb.voxel_size)
+    for a in range(3):
+        assert clo[a] == pytest.approx(mlo[a] + half + shift, abs=1e-3 * half), (a, clo, mlo)
+        assert chi[a] == pytest.approx(mhi[a] - half + shift, abs=1e-3 * half), (a, chi, mhi)
+    rendered_lo, rendered_hi = placement.drawn_box(lo, hi, obj.licvdb.voxel_size)
     for a in range(3):
         assert rendered_lo[a] == pytest.approx(mlo[a], abs=1e-3 * half), (a, rendered_lo, mlo)
         assert rendered_hi[a] == pytest.approx(mhi[a], abs=1e-3 * half), (a, rendered_hi, mhi)
@@ -195,8 +203,10 @@ def test_placement_matches_field_bbox(bakes):
     for a in range(3):
         assert rendered_lo[a] == pytest.approx(flo[a], abs=half + 1e-6), (a, rendered_lo, flo)
         assert rendered_hi[a] == pytest.approx(fhi[a], abs=half + 1e-6), (a, rendered_hi, fhi)
-    print(f"placement: rendered {rendered_lo} .. {rendered_hi}; manifest {mlo} .. {mhi}; "
-          f"field {flo} .. {fhi}; half voxel {half:.4f}, shift {shift:.4f}")
+    print(f"placement (Blender {bpy.app.version_string}, bound box spans "
+          f"{'faces' if placement.bound_box_spans_faces() else 'centres'}): bound box {lo} .. {hi}; rendered "
+          f"{rendered_lo} .. {rendered_hi}; manifest {mlo} .. {mhi}; field {flo} .. {fhi}; half voxel {half:.4f}, "
+          f"shift {shift:.4f}")
 
 
 def test_import_half_float_spot_bake(bakes, tmp_path):

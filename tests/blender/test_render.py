@@ -24,6 +24,16 @@ def crossing(tmp_path_factory):
     return path
 
 
+def test_halo_bake_gets_the_halo_look(crossing):
+    """What the render below starts from, checked apart from it (it runs where Blender cannot render)."""
+    assert bpy.ops.licvdb.import_bake(filepath=crossing) == {"FINISHED"}
+    obj = bpy.context.active_object
+    assert obj.licvdb.look == "HALOS"  # a bake with a halo grid gets the halo look
+    nodes = obj.active_material.node_tree.nodes
+    assert "halo minus line" in nodes and nodes["halo minus line"].operation == "SUBTRACT"
+
+
+@pytest.mark.renders
 def test_halo_render_shows_gap(crossing, tmp_path):
     assert bpy.ops.licvdb.import_bake(filepath=crossing) == {"FINISHED"}
     obj = bpy.context.active_object

@@ -6,6 +6,7 @@ import subprocess
 
 import bpy
 import numpy as np
+import pytest
 
 from conftest import run_licvdb
 
@@ -23,6 +24,7 @@ def luminance(path):
     return 0.2126 * px[..., 0] + 0.7152 * px[..., 1] + 0.0722 * px[..., 2]
 
 
+@pytest.mark.renders
 def test_blender_render_tool_matches_the_reference_camera(tmp_path):
     field, bake = tmp_path / "abc.vdb", tmp_path / "spots.vdb"
     run_licvdb("field", "abc", "--res", "16,16,16", "--out", field, "--quiet")
@@ -47,6 +49,11 @@ def test_blender_render_tool_matches_the_reference_camera(tmp_path):
     print(f"blender_render.py vs licvdb render (48², same camera): line-mask IoU {iou:.3f}")
     assert iou > 0.5, iou
 
+
+def test_blender_render_tool_rejects_bad_arguments(tmp_path):
+    field, bake = tmp_path / "abc.vdb", tmp_path / "lic.vdb"
+    run_licvdb("field", "abc", "--res", "8,8,8", "--out", field, "--quiet")
+    run_licvdb("bake", "--field", field, "--out", bake, "--upsample", "1", "--length", "4", "--quiet")
     # Bad arguments end Blender with a non-zero exit and the tool's usage message.
     bad = subprocess.run([bpy.app.binary_path, "-b", "--factory-startup", "--python-exit-code", "1", "-P", TOOL,
                           "--", str(bake)], capture_output=True, text=True, timeout=120)

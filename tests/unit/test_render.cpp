@@ -543,9 +543,20 @@ TEST(ImageIO, ExrIsSceneLinearAndRoundTrips)
     ASSERT_EQ(back.width, 4);
     ASSERT_EQ(back.height, 2);
     for (std::size_t i = 0; i < img.rgba.size(); ++i) EXPECT_EQ(back.rgba[i], img.rgba[i]) << i;
-    EXPECT_EQ(cs, "Linear");
+    EXPECT_EQ(cs, "lin_rec709_scene"); // OIIO 2.4 reads "Linear", 3.x "lin_rec709_scene"
     EXPECT_FALSE(fs::exists(path + ".tmp-" + std::to_string(::getpid())));
     fs::remove_all(dir);
+}
+
+// OIIO 2.4 and 3.x name the same colour spaces differently; readImage reports one name.
+TEST(ImageIO, ColorSpaceNamesOfEveryOiioAreOne)
+{
+    for (const char* name : {"Linear", "linear", "lin_rec709", "lin_srgb", "lin_rec709_scene"})
+        EXPECT_EQ(vdbexport::canonicalColorSpace(name), "lin_rec709_scene") << name;
+    for (const char* name : {"sRGB", "srgb", "srgb_rec709_scene"})
+        EXPECT_EQ(vdbexport::canonicalColorSpace(name), "srgb_rec709_scene") << name;
+    EXPECT_EQ(vdbexport::canonicalColorSpace("ACEScg"), "ACEScg");
+    EXPECT_EQ(vdbexport::canonicalColorSpace(""), "");
 }
 
 TEST(ImageIO, PngGoesThroughTheOcioDisplayTransform)

@@ -145,7 +145,10 @@ TEST_F(VdbCheckTest, UnsupportedFormatVersionIsNamed)
     writeFile(path, bytes);
     const std::string msg = inputErrorOf([&] { vdbexport::checkVdbStructure(path); });
     EXPECT_CONTAINS(msg, "format version 220");
-    EXPECT_CONTAINS(msg, "222 to 224");
+    // The range is the OpenVDB licvdb is built with: 222 to 224 for OpenVDB 10, 222 to 225 for 13.
+    EXPECT_CONTAINS(msg, "222 to " + std::to_string(openvdb::OPENVDB_FILE_VERSION) + " ");
+    EXPECT_CONTAINS(msg, "(OpenVDB 2.0 to " + std::to_string(OPENVDB_LIBRARY_MAJOR_VERSION_NUMBER) + "."
+                             + std::to_string(OPENVDB_LIBRARY_MINOR_VERSION_NUMBER) + ", ");
 }
 
 // Hundreds of mutants of nine files (byte flips, truncations, huge 4- and 8-byte words, sizes off

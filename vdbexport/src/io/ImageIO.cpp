@@ -221,6 +221,17 @@ void writeGifAtomic(const std::string& path, const std::vector<lic::Image>& fram
     commit(tmp, path);
 }
 
+std::string canonicalColorSpace(const std::string& oiioName)
+{
+    std::string lower(oiioName);
+    for (char& c : lower) c = char(std::tolower(static_cast<unsigned char>(c)));
+    for (const char* name : {"linear", "lin_rec709", "lin_srgb", "lin_rec709_scene"})
+        if (lower == name) return "lin_rec709_scene";
+    for (const char* name : {"srgb", "srgb_rec709_scene"})
+        if (lower == name) return "srgb_rec709_scene";
+    return oiioName;
+}
+
 lic::Image readImage(const std::string& path, std::string* colorSpace)
 {
     auto in = OIIO::ImageInput::open(path);
@@ -229,7 +240,7 @@ lic::Image readImage(const std::string& path, std::string* colorSpace)
     std::vector<float> buf(std::size_t(spec.width) * std::size_t(spec.height) * std::size_t(spec.nchannels));
     if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, buf.data()))
         throw lic::InputError("cannot read image " + quote(path) + ": " + in->geterror());
-    if (colorSpace) *colorSpace = spec.get_string_attribute("oiio:ColorSpace");
+    if (colorSpace) *colorSpace = canonicalColorSpace(spec.get_string_attribute("oiio:ColorSpace"));
     lic::Image img(spec.width, spec.height);
     const std::size_t nc = std::size_t(spec.nchannels);
     for (std::size_t i = 0, n = std::size_t(spec.width) * std::size_t(spec.height); i < n; ++i) {

@@ -298,7 +298,9 @@ void Checker::header(VdbCheckResult& r)
                               + std::to_string(r.libraryMinor) + "); licvdb reads versions "
                               + std::to_string(openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION) + " to "
                               + std::to_string(openvdb::OPENVDB_FILE_VERSION)
-                              + " (OpenVDB 2.0 to 10.x): save it again with such a version, or it is corrupt");
+                              + " (OpenVDB 2.0 to " + std::to_string(OPENVDB_LIBRARY_MAJOR_VERSION_NUMBER) + "."
+                              + std::to_string(OPENVDB_LIBRARY_MINOR_VERSION_NUMBER)
+                              + ", the version licvdb was built with): save it again with such a version, or it is corrupt");
 }
 
 void Checker::checkBools(const char* data, uint64_t n)

@@ -42,7 +42,8 @@ std::vector<float> toDisplay(const lic::Image& image, const DisplayTransform& tr
 bool isSceneLinearPath(const std::string& path);
 
 /// @brief Write one image. `.exr`: RGBA 32-bit float, scene-linear Rec.709 (tagged with
-///        `oiio:ColorSpace` = "Linear" and Rec.709 `chromaticities`), premultiplied alpha.
+///        `oiio:ColorSpace` = "Linear" and Rec.709 `chromaticities`; read back as
+///        "lin_rec709_scene", see canonicalColorSpace), premultiplied alpha.
 ///        Others: 8-bit RGB after `transform` (tagged `oiio:ColorSpace` = "sRGB").
 /// @param metadata string attributes stored in the file (e.g. `Software`, `ImageDescription`)
 /// @throw lic::InputError for an unsupported extension or an unusable output directory;
@@ -56,7 +57,15 @@ void writeGifAtomic(const std::string& path, const std::vector<lic::Image>& fram
                     double fps = 12.0);
 
 /// @brief Read an image back as float RGBA (for tests and tools): channels beyond 4 dropped,
-///        missing alpha = 1. @throw lic::InputError if it cannot be read.
+///        missing alpha = 1. `colorSpace` (if given) receives OpenImageIO's `oiio:ColorSpace`
+///        through canonicalColorSpace. @throw lic::InputError if it cannot be read.
 lic::Image readImage(const std::string& path, std::string* colorSpace = nullptr);
+
+/// @brief One name per colour space whatever OpenImageIO reads it as: scene-linear Rec.709 is
+///        "Linear" in OIIO 2.4 and "lin_rec709_scene" in OIIO 3.x (aliases "linear", "lin_rec709",
+///        "lin_srgb"), sRGB is "sRGB" in 2.4 and "srgb_rec709_scene" in 3.x. Returns
+///        "lin_rec709_scene" or "srgb_rec709_scene" (OIIO 3's and OCIO's built-in names) for
+///        those, any other name unchanged.
+std::string canonicalColorSpace(const std::string& oiioName);
 
 } // namespace vdbexport
