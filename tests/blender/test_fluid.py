@@ -257,11 +257,11 @@ def test_bake_job_cancel_leaves_no_files(tmp_path):
         time.sleep(0.05)
     assert 0.0 < job.fraction < 0.5, (job.fraction, job.progress_seen)
     assert "frame 1 (1/2, " in job.status()
-    t0 = time.monotonic()
-    job.cancel()
+    # A generous grace (a busy machine may be slow to schedule licvdb): licvdb must stop on SIGINT
+    # by itself; the kill after the grace would leave -9, not 1.
+    job.cancel(grace=120.0)
     assert job.proc.returncode is not None
-    assert time.monotonic() - t0 < 5.0, "licvdb did not stop on SIGINT"
-    assert job.proc.returncode == 1  # licvdb's "cancelled; no output written", not a kill
+    assert job.proc.returncode == 1, "licvdb did not stop on SIGINT"  # "cancelled; no output written", not a kill
     assert job.cancelled and job.finished
     assert os.listdir(out) == []
     assert not os.path.exists(job.workdir)

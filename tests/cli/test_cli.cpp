@@ -639,8 +639,8 @@ TEST_F(CliTest, InfoHelpVersion)
     const RunResult help = run({"help"});
     EXPECT_EQ(help.code, 0) << help.describe();
     // The list's heading is CLI11's: "Subcommands:" in 2.1 (Debian 12), "SUBCOMMANDS:" in 2.6 (sid).
-    const auto hasHeading = [](const std::string& text) {
-        return text.find("Subcommands:") != std::string::npos || text.find("SUBCOMMANDS:") != std::string::npos;
+    const auto hasHeading = [](const std::string& s) {
+        return s.find("Subcommands:") != std::string::npos || s.find("SUBCOMMANDS:") != std::string::npos;
     };
     EXPECT_TRUE(hasHeading(none.err)) << none.describe();
     EXPECT_TRUE(hasHeading(help.out)) << help.describe();

@@ -18,6 +18,7 @@
 #include "lic/texture/Spots.h"
 
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <cstring>
 #include <limits>
@@ -111,6 +112,13 @@ TEST_F(Distribute, AssignmentIsContiguousBalancedAndDeterministic)
     for (int ranks : {1, 2, 3, 4, 7, 64, 200}) {
         const std::vector<int> a = pipeline::assignBricks(layout, ranks);
         EXPECT_EQ(a, pipeline::assignBricks(layout, ranks)) << "deterministic";
+        // Every process works the assignment out alone, from the layout of its own share of the
+        // field: the last rank's share, read on one thread, gives the same assignment.
+        if (ranks <= 7) {
+            const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+            const pipeline::FieldShare last = pipeline::readFieldShare(plan, ranks - 1, ranks);
+            EXPECT_EQ(last.assignment, a) << "rank " << ranks - 1 << " of " << ranks;
+        }
         ASSERT_EQ(a.size(), layout.size());
         std::vector<std::uint64_t> load(std::size_t(ranks), 0);
         for (std::size_t id = 0; id < a.size(); ++id) {

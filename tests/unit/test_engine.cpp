@@ -361,6 +361,14 @@ TEST(Animation, LoopIsSeamlessSteadyAndMovesDownstream)
         for (int f = 0; f + 1 < N; ++f) consecutive += meanAbsDiff(domain, frames[f], frames[f + 1]) / (N - 1);
         EXPECT_GT(consecutive, 1e-3) << toString(e) << ": frames do not change";
         EXPECT_LE(meanAbsDiff(domain, frames[N - 1], frames[0]), 1.5 * consecutive) << toString(e);
+        // The step from frame N back to frame 1 is a step like the others (frame N+1 = frame 1 above
+        // holds by the phase's construction; this does not): it changes the picture as much as
+        // a step does (a loop whose last frame repeats its first freezes there) and moves it
+        // downstream, as frame 1 to 2 does (not back by a loop's worth of motion).
+        EXPECT_GE(meanAbsDiff(domain, frames[N - 1], frames[0]), 0.5 * consecutive) << toString(e) << ": the loop stalls at its seam";
+        EXPECT_GT(correlation(domain, frames[N - 1], frames[0], openvdb::Coord(1, 0, 0)),
+                  correlation(domain, frames[N - 1], frames[0], openvdb::Coord(-1, 0, 0)))
+            << toString(e) << ": the seam step should move downstream";
         // No pulsing: the mean of every frame within 5% of the others' (raw values ~0.5, and the
         // fluctuation relative to the frames' spread around it).
         double lo = 1e9, hi = -1e9;

@@ -42,6 +42,15 @@ double correlation(const OutputDomain& d, const std::vector<float>& a, const std
     return (sxy - sx * sy / n) / std::sqrt((sxx - sx * sx / n) * (syy - sy * sy / n));
 }
 
+/// Mean |a − b| over the active voxels.
+double meanAbsDiff(const OutputDomain& d, const std::vector<float>& a, const std::vector<float>& b)
+{
+    double s = 0, n = 0;
+    for (std::size_t i = 0; i < a.size(); ++i)
+        if (d.isActive(i)) s += std::abs(double(a[i]) - double(b[i])), n += 1;
+    return s / n;
+}
+
 } // namespace
 
 TEST(SplatTables, MatchTheWindowSumOfAStraightLine)
@@ -125,6 +134,19 @@ TEST(Splat, LoopFramesAgreeWithNaiveForBothKernels)
                 std::printf("%s loop frame %d channel %d: splat vs naive %.4f\n", toString(k), f, ch, r);
                 EXPECT_GE(r, 0.9) << toString(k) << " frame " << f << " channel " << ch;
             }
+        }
+        // Seamless: the splat loop's step from frame 8 back to frame 1 changes the lines and halos
+        // as much as its other steps do (within ×0.5 … ×1.5 of their mean), no jump, no stall.
+        for (int ch = 0; ch < 2; ++ch) {
+            std::vector<std::vector<float>> frames;
+            for (int f = 1; f <= 8; ++f) frames.push_back(composeFrame(splat, 2, ch, f, 8));
+            double step = 0;
+            for (int f = 0; f + 1 < 8; ++f) step += meanAbsDiff(domain, frames[std::size_t(f)], frames[std::size_t(f + 1)]) / 7.0;
+            const double seam = meanAbsDiff(domain, frames[7], frames[0]);
+            std::printf("%s splat loop channel %d: mean step %.5f, seam step %.5f\n", toString(k), ch, step, seam);
+            EXPECT_GT(step, 1e-4) << toString(k) << " channel " << ch << ": the frames do not change";
+            EXPECT_LE(seam, 1.5 * step) << toString(k) << " channel " << ch << ": a jump at the seam";
+            EXPECT_GE(seam, 0.5 * step) << toString(k) << " channel " << ch << ": a stall at the seam";
         }
     }
 }

@@ -4,6 +4,7 @@
 // runs this under ASan + UBSan), never more than 10 s.
 #include <gtest/gtest.h>
 
+#include "CpuTime.h"
 #include "VdbMutants.h"
 #include "VdbSamples.h"
 
@@ -130,9 +131,11 @@ TEST_F(VdbCheckTest, HugeCountsAreRefusedAtOnce)
     const uint32_t big = 0xFFFFFFFFu;
     std::memcpy(&m[57], &big, 4);
     writeFile(path, m);
-    const auto t0 = std::chrono::steady_clock::now();
+    // At once: no attempt to read or allocate 4 billion entries (CPU time, not wall time: a busy
+    // machine does not make it fail).
+    const double cpu0 = lictest::processCpuSeconds();
     EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkVdbStructure(path); }), "4294967295 metadata entries");
-    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 1.0);
+    EXPECT_LT(lictest::processCpuSeconds() - cpu0, 1.0);
 }
 
 TEST_F(VdbCheckTest, UnsupportedFormatVersionIsNamed)
@@ -171,7 +174,7 @@ TEST_F(VdbCheckTest, MutantsAreReadOrRefusedNeverCrash)
                 writeFile(path, m);
                 vdbexport::detail::clearCheckedVdbCache();
                 SCOPED_TRACE(fs::path(sample).filename().string() + ", " + vdb_mutants::kindName(kind) + " #" + std::to_string(n));
-                const auto t0 = std::chrono::steady_clock::now();
+                const double cpu0 = lictest::processCpuSeconds();
                 bool ok = true;
                 try {
                     (void)vdbexport::describeVdb(path);
@@ -194,7 +197,8 @@ TEST_F(VdbCheckTest, MutantsAreReadOrRefusedNeverCrash)
                 } catch (const std::exception& e) {
                     ADD_FAILURE() << "not an InputError: " << e.what();
                 }
-                const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+                // A runaway loop or a huge allocation spends CPU time; a busy machine only wall time.
+                const double s = lictest::processCpuSeconds() - cpu0;
                 maxSeconds = std::max(maxSeconds, s);
                 EXPECT_LT(s, 10.0);
                 ++total;
@@ -203,7 +207,7 @@ TEST_F(VdbCheckTest, MutantsAreReadOrRefusedNeverCrash)
         }
     }
     std::cout << "[ mutants  ] " << total << " mutants of " << samples.size() << " files: " << read << " read, "
-              << refused << " refused, slowest " << maxSeconds << " s\n";
+              << refused << " refused, slowest " << maxSeconds << " s of CPU time\n";
     for (const auto& [why, count] : reasons) std::cout << "[ mutants  ]   refused, " << why << ": " << count << "\n";
     EXPECT_GE(total, 500);
     EXPECT_GT(refused, total / 4); // the mutations do hit: most mutants are refused
@@ -259,7 +263,9 @@ TEST_F(VdbCheckTest, IsolatedChildOutcomes)
     vdbexport::setReadIsolation(script(mDir, "hang.sh", "exec sleep 60"));
     const auto t0 = std::chrono::steady_clock::now();
     EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkInIsolatedProcess(file); }), "did not finish within 1 s");
-    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+    // Killed at the time-out, long before the child's 60 s sleep ends (a generous bound: the
+    // machine may be busy).
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 30.0);
     // Another failure of the child is a runtime error (exit 1), not bad input.
     vdbexport::setReadIsolation(script(mDir, "fail.sh", "echo 'licvdb info: error: out of memory' >&2\nexit 1"));
     EXPECT_THROW(vdbexport::checkInIsolatedProcess(file), lic::Error);

@@ -592,9 +592,13 @@ TEST_F(VdbCheckRulesTest, LayoutOfEverySampleEndsWhereItsOffsetsSay)
             SCOPED_TRACE(g.name);
             if (g.endPos > 0) {
                 EXPECT_EQ(g.end, std::size_t(g.endPos));
-                if (g.tree) EXPECT_EQ(g.leafBuffers.empty() ? std::size_t(g.blockPos) : g.leafBuffers.front(), std::size_t(g.blockPos));
+                if (g.tree) {
+                    EXPECT_EQ(g.leafBuffers.empty() ? std::size_t(g.blockPos) : g.leafBuffers.front(), std::size_t(g.blockPos));
+                }
             }
-            if (g.tree) EXPECT_EQ(g.leafTopology.size(), g.leafBuffers.size());
+            if (g.tree) {
+                EXPECT_EQ(g.leafTopology.size(), g.leafBuffers.size());
+            }
         }
         EXPECT_EQ(l.grids.back().end, bytes.size());
     }
@@ -698,7 +702,7 @@ TEST_F(VdbCheckRulesTest, EveryRuleIsTestedOrKnownUnreachable)
     const std::string source = readFile(fs::path(LICVDB_SOURCE_DIR) / "vdbexport/src/io/VdbCheck.cpp");
     std::set<std::string> rules;
     std::size_t sites = 0;
-    const std::regex site(R"(throw (corrupt|truncated|refusal)\("([a-z0-9-]+)")");
+    const std::regex site(R"re(throw (corrupt|truncated|refusal)\("([a-z0-9-]+)")re");
     for (auto it = std::sregex_iterator(source.begin(), source.end(), site); it != std::sregex_iterator(); ++it, ++sites)
         EXPECT_TRUE(rules.insert((*it)[2]).second) << "two throw sites share rule " << (*it)[2];
     std::size_t throws = 0;
