@@ -14,10 +14,12 @@ import controls
 
 ADDON = "licvdb"
 
-#: marker → (control, the exception a test fails with where the control shows the build lacks it)
+#: marker → (control, the exceptions a test fails with where the control shows the build lacks it)
 CAPABILITIES = {
-    "renders": (controls.vdb_render, AssertionError),
-    "smoke": (controls.smoke_simulation, controls.BlenderAborted),
+    "renders": (controls.vdb_render, (AssertionError,)),
+    "smoke": (controls.smoke_simulation, (controls.BlenderAborted,)),
+    # licvdb's refusal surfaces as run_licvdb's assertion or as the bake operator's error.
+    "reads_blender_vdb": (lambda: controls.licvdb_reads_blender_vdb(licvdb_exe()), (AssertionError, RuntimeError)),
 }
 
 
@@ -26,6 +28,9 @@ def pytest_configure(config):
                                        "controls.vdb_render shows this Blender renders none)")
     config.addinivalue_line("markers", "smoke: runs a smoke simulation (an expected failure where "
                                        "controls.smoke_simulation shows this Blender aborts on any)")
+    config.addinivalue_line("markers", "reads_blender_vdb: licvdb reads a .vdb this Blender's OpenVDB wrote (a smoke "
+                                       "cache, OpenVDB's Python module; an expected failure where "
+                                       "controls.licvdb_reads_blender_vdb shows this licvdb cannot)")
     config.addinivalue_line("markers", "older_branch: forces a compat branch of an older Blender on purpose "
                                        "(its deprecation warnings are expected)")
 
@@ -35,9 +40,15 @@ def pytest_collection_modifyitems(config, items):
     """A test that needs what this build cannot do (its control, run once without the add-on, says
     so) is a strict expected failure with the control's finding as the reason: it still runs, a
     pass fails the run (XPASS strict), and so does a failure of another kind than ``raises``."""
-    for item in items:  # every test with a simulated smoke domain (test_fluid's fixture) needs smoke
-        if "smoke" in getattr(item, "fixturenames", ()) and not item.get_closest_marker("smoke"):
+    for item in items:
+        names = getattr(item, "fixturenames", ())
+        # every test with a simulated smoke domain (test_fluid's fixture) needs smoke
+        if "smoke" in names and not item.get_closest_marker("smoke"):
             item.add_marker(pytest.mark.smoke)
+        # test_render's halo crossing is written by OpenVDB's Python module and read by licvdb
+        if "crossing" in names and not item.get_closest_marker("reads_blender_vdb"):
+            item.add_marker(pytest.mark.reads_blender_vdb)
+    lacks = {}  # item → the failed controls it needs
     for marker, (control, raises) in CAPABILITIES.items():
         marked = [item for item in items if item.get_closest_marker(marker)]
         if not marked:
@@ -45,7 +56,11 @@ def pytest_collection_modifyitems(config, items):
         found = control()
         if not found.works:
             for item in marked:
-                item.add_marker(pytest.mark.xfail(reason=found.reason, strict=True, raises=raises))
+                lacks.setdefault(item, []).append((found, raises))
+    # One mark per test (pytest uses only the first xfail mark): every reason, every exception.
+    for item, failed in lacks.items():
+        item.add_marker(pytest.mark.xfail(reason="; ".join(f.reason for f, _ in failed), strict=True,
+                                          raises=tuple(e for _, r in failed for e in r)))
 
 
 def licvdb_exe() -> str:

@@ -8,14 +8,22 @@ add-on (measured in Debian's builds, see docs/blender.md, "Tested versions"):
 - Debian's Blender 4.3.2 aborts on any smoke simulation (mantaflow registers its Python module
   with ``PyImport_AppendInittab`` after Python started, fatal since Python 3.12).
 
-Each control runs a minimal script in a child Blender started with ``--factory-startup`` (the
-add-on is not loaded, and an abort ends only the child): a plain volume object reading a ``.vdb``
-written by OpenVDB's own Python module, rendered with an emission shader; a tiny smoke
-simulation. conftest.py marks the tests that need the capability (``@pytest.mark.renders``,
-``@pytest.mark.smoke``) as strict expected failures when, and only when, the control shows the
-build lacks it: such a test still runs (a smoke test in a child Blender, see ``run_smoke``), is
-reported XFAIL with the control's finding, and fails the run if it passes (XPASS strict) or fails
-another way.
+One control is about the pair rather than Blender alone: a licvdb built against an older OpenVDB
+than this Blender's (the host's Debian 12 build, OpenVDB 10, carried into sid by
+scripts/test-modern's default mode) cannot read the .vdb files this Blender's OpenVDB writes
+(OpenVDB 13 writes file format 225, which OpenVDB 10 refuses): its smoke caches and the files of
+OpenVDB's Python module.
+
+Each Blender control runs a minimal script in a child Blender started with ``--factory-startup``
+(the add-on is not loaded, and an abort ends only the child): a plain volume object reading a
+``.vdb`` written by OpenVDB's own Python module, rendered with an emission shader; a tiny smoke
+simulation. The licvdb control runs ``licvdb info`` on a grid written by OpenVDB's Python module
+(the OpenVDB of this Blender's Python and, in a distribution, of Blender itself). conftest.py
+marks the tests that need the capability (``@pytest.mark.renders``, ``@pytest.mark.smoke``,
+``@pytest.mark.reads_blender_vdb``) as strict expected failures when, and only when, the control
+shows the build lacks it: such a test still runs (a smoke test in a child Blender, see
+``run_smoke``), is reported XFAIL with the control's finding, and fails the run if it passes
+(XPASS strict) or fails another way.
 """
 
 from __future__ import annotations
@@ -251,6 +259,40 @@ def run_smoke(cache_dir) -> None:
                              "without the add-on did")
     if proc.returncode != 0:
         raise RuntimeError("the smoke simulation failed in a child Blender:\n" + proc.stdout[-2000:] + proc.stderr[-2000:])
+
+
+def licvdb_reads_blender_vdb(licvdb: str) -> Control:
+    """Does ``licvdb`` read a .vdb written by this Blender's OpenVDB? A tiny grid written with
+    OpenVDB's Python module, then ``licvdb info`` on it. (Once per session.)"""
+    if "reads" not in _cache:
+        import numpy as np
+
+        vdb = vdb_module()
+        version = getattr(getattr(bpy.app, "openvdb", None), "version", None)
+        openvdb = "OpenVDB " + ".".join(map(str, version)) if version else "OpenVDB ?"
+        with tempfile.TemporaryDirectory(prefix="licvdb-control-") as tmp:
+            path = os.path.join(tmp, "small.vdb")
+            g = vdb.FloatGrid()
+            g.name = "density"
+            g.gridClass = vdb.GridClass.FOG_VOLUME
+            g.copyFromArray(np.broadcast_to(0.5 + np.arange(4, dtype=np.float32)[:, None, None] / 8, (4, 4, 4)).copy(),
+                            ijk=(0, 0, 0), tolerance=0.0)
+            vdb.write(path, grids=[g])
+            proc = subprocess.run([licvdb, "info", path, "--json"], capture_output=True, text=True, timeout=120)
+        said = (proc.stderr.strip().splitlines() or [""])[0].replace(f"'{path}'", "small.vdb")
+        if proc.returncode == 0:
+            control = Control("reads_blender_vdb", True, f"licvdb reads a .vdb written by OpenVDB's Python module "
+                              f"(this Blender's OpenVDB: {openvdb})")
+        elif "file format version" in said:
+            control = Control("reads_blender_vdb", False, "this licvdb cannot read the .vdb files of this Blender's "
+                              f"OpenVDB ({openvdb}; it was built against an older one): `licvdb info` on a grid "
+                              f"written by OpenVDB's Python module: {said}")
+        else:
+            raise RuntimeError(f"the licvdb read control failed to run (not a finding about this licvdb):\n"
+                               f"{proc.stdout[-2000:]}{proc.stderr[-2000:]}")
+        _cache["reads"] = control
+        print(f"\ncontrol: {control.reason}")
+    return _cache["reads"]
 
 
 def vdb_module():

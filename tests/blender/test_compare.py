@@ -69,6 +69,7 @@ def gap_ratio(lum, cam):
 
 
 @pytest.mark.renders
+@pytest.mark.reads_blender_vdb  # licvdb renders the crossing written by OpenVDB's Python module
 def test_blender_matches_reference_raycaster(tmp_path):
     crossing = hf.write(tmp_path)
     # Scene-linear EXR from both renderers: no display transform in the comparison.

@@ -76,6 +76,7 @@ def smoke(tmp_path):
     return dom
 
 
+@pytest.mark.reads_blender_vdb  # licvdb reads this Blender's smoke cache
 def test_cache_velocity_grid_is_readable(smoke):
     """What mantaflow writes in Blender 3.4: a vec3s `velocity` grid of class staggered, stored as
     half floats, active where there is smoke; licvdb reads it."""
@@ -111,6 +112,7 @@ def test_placement_of_cache_coordinates(smoke):
     assert world.y == pytest.approx(SPHERE_LOC[1], abs=0.25 * cell), world
 
 
+@pytest.mark.reads_blender_vdb  # licvdb reads this Blender's smoke cache
 def test_bake_fluid_current_frame(smoke, tmp_path):
     bpy.context.scene.frame_set(3)
     t0 = time.monotonic()
@@ -143,6 +145,7 @@ def test_bake_fluid_current_frame(smoke, tmp_path):
     print(f"bake_fluid: one frame of a {RES}³ smoke domain baked and imported in {seconds:.2f} s")
 
 
+@pytest.mark.reads_blender_vdb  # licvdb reads this Blender's smoke cache
 def test_bake_fluid_frame_range_is_a_sequence(smoke):
     s = bpy.context.scene.licvdb_bake
     s.use_frame_range = True
@@ -168,6 +171,7 @@ def test_bake_fluid_frame_range_is_a_sequence(smoke):
     assert again.data.frame_start == 2 and again.data.sequence_mode == "CLIP" and again.data.frame_duration == 3
 
 
+@pytest.mark.reads_blender_vdb  # licvdb reads this Blender's smoke cache
 def test_bake_fluid_cached_range_is_one_coherent_sequence(smoke):
     """By default a frame range is the domain's cache range (1-4 here), baked as one sequence whose
     texture is carried by the smoke: consecutive frames are alike, but not identical."""
@@ -194,6 +198,7 @@ def test_bake_fluid_cached_range_is_one_coherent_sequence(smoke):
     assert 0.3 < r < 0.999, f"frames 3 and 4 correlate {r}: carried texture should be alike, not identical"
 
 
+@pytest.mark.reads_blender_vdb  # licvdb reads this Blender's smoke cache
 def test_bake_fluid_one_frame_as_a_loop(smoke):
     s = bpy.context.scene.licvdb_bake
     s.loop_frames = 3
