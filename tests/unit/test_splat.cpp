@@ -84,14 +84,16 @@ TEST(Splat, AgreesWithNaiveOnTheSameSpots)
 {
     // A small tabbed jet (diverging, with vortices), three widths with halos: every channel of the
     // splat correlates with the naive gather ≥ 0.9 where either is non-zero, for the box and exp
-    // kernels; in uniform flow it is exact to interpolation.
+    // kernels; in uniform flow it is exact to interpolation. The exp kernel's bounds are tight
+    // (measured 0.9905 / 0.9699 at least): without the flow map carried along the line (offsets
+    // not transported, G = I) it still reaches 0.9685 / 0.9576, and must fail.
     struct Case
     {
         const char* preset;
         KernelType kernel;
         double minLine, minHalo;
     };
-    for (const Case& c : {Case{"tabbed-jet", KernelType::Box, 0.95, 0.9}, Case{"tabbed-jet", KernelType::Exp, 0.95, 0.9},
+    for (const Case& c : {Case{"tabbed-jet", KernelType::Box, 0.95, 0.9}, Case{"tabbed-jet", KernelType::Exp, 0.985, 0.96},
                           Case{"uniform", KernelType::Box, 0.995, 0.99}}) {
         const VelocityField field(makePresetField(c.preset, openvdb::Coord(32, 32, 48)).velocity);
         const OutputDomain domain(field, 2);
