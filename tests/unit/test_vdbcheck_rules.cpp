@@ -437,11 +437,20 @@ std::vector<RuleCase> ruleCases()
         {"delayed-count", kField, [](std::string& b, const FileLayout& l) { poke<uint32_t>(b, delayedTable(velocity(l)) + 4, 0x7FFFFFFFu); },
          "the delayed-load table lists 2147483647 leaves, more than a file of"},
         {"delayed-leaves", kField,
-         [](std::string& b, const FileLayout& l) { // one leaf more: still within the blocks' 128-byte padding
+         [](std::string& b, const FileLayout& l) {
+             // One leaf fewer, consistently: the count, the raw mask array one byte shorter, and a
+             // byte of slack at the value's end (its size and every offset stay as they are).
              const std::size_t count = delayedTable(velocity(l)) + 4;
-             poke<uint32_t>(b, count, peek<uint32_t>(b, count) + 1);
+             const uint32_t n = peek<uint32_t>(b, count);
+             if (peek<uint32_t>(b, count + 4) != 0) throw std::runtime_error("the masks are not stored raw");
+             poke<uint32_t>(b, count, n - 1);
+             b.erase(count + 8 + (n - 1), 1);
+             const std::size_t sizes = count + 8 + (n - 1);
+             const uint32_t stored = peek<uint32_t>(b, sizes);
+             const std::size_t after = sizes + 4 + (stored == 0xFFFFFFFFu ? 0 : stored == 0 ? 8 * (n - 1) : stored);
+             b.insert(after, 1, '\0');
          },
-         "its delayed-load table lists 9 leaves; the tree has 8"},
+         "its delayed-load table lists 7 leaves; the tree has 8"},
         // -- transforms -------------------------------------------------------------------------
         {"affine-singular", kAllBlosc,
          [](std::string& b, const FileLayout& l) { // the frustum's linear map: a zero matrix

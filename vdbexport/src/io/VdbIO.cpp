@@ -253,21 +253,9 @@ void commitAtomicWrite(const std::string& tmp, const std::string& path)
 VdbReader::VdbReader(std::string path) : mPath(std::move(path))
 {
     openvdb::initialize();
-    if (mPath.empty()) throw lic::InputError("no .vdb file given; expected a path to a .vdb file");
-    std::error_code ec;
-    const fs::path p(mPath);
-    const auto status = fs::status(p, ec);
-    if (!fs::exists(status))
-        throw lic::InputError("file " + quote(mPath) + " not found; expected a .vdb file");
-    if (fs::is_directory(status))
-        throw lic::InputError(quote(mPath) + " is a directory; expected a .vdb file");
-    const auto size = fs::file_size(p, ec);
-    if (!ec && size == 0)
-        throw lic::InputError("file " + quote(mPath) + " is empty (0 bytes); expected a .vdb file");
-    if (!std::ifstream(mPath, std::ios::binary))
-        throw lic::InputError("cannot open " + quote(mPath) + " for reading (" + std::strerror(errno)
-                              + "); expected a readable .vdb file");
     try {
+        // The path itself (none, missing, a directory, empty, unreadable) first: the check's
+        // rules no-path, not-found, directory, empty and open, with their marker.
         mCheck = checkedVdb(mPath);
     } catch (const lic::Error&) {
         throw;
