@@ -46,20 +46,17 @@ double gatherFieldReach(const LicSettings& settings, bool spots, double maxSpotR
 
 // The engine table.
 constexpr EngineInfo kEngines[] = {
-    {EngineType::Naive, "naive", "every voxel traces its own streamline (the reference; slow)", gatherBrickDim,
+    {EngineType::Naive, kEngineNames[0].name.data(), "every voxel traces its own streamline (the reference; slow)", gatherBrickDim,
      gatherSpotReach, gatherFieldReach, gatherNoiseBricks<NaiveEngine>, gatherSpotBricks<NaiveEngine>},
-    {EngineType::Fast, "fast", "fast-LIC: long streamlines deposit into every voxel they cross", gatherBrickDim,
+    {EngineType::Fast, kEngineNames[1].name.data(), "fast-LIC: long streamlines deposit into every voxel they cross", gatherBrickDim,
      gatherSpotReach, gatherFieldReach, gatherNoiseBricks<FastEngine>, gatherSpotBricks<FastEngine>},
-    {EngineType::Splat, "splat", "spots only: one streamline per spot, its footprint splatted around it",
+    {EngineType::Splat, kEngineNames[2].name.data(), "spots only: one streamline per spot, its footprint splatted around it",
      splatBrickDim, splatSpotReach, splatFieldReach, nullptr, splatSpotBricks},
 };
 
-std::vector<EnumName<EngineType>> engineNames()
-{
-    std::vector<EnumName<EngineType>> names;
-    for (const EngineInfo& e : kEngines) names.push_back({e.type, e.name});
-    return names;
-}
+static_assert(std::size(kEngines) == std::size(kEngineNames));
+static_assert(kEngines[0].type == kEngineNames[0].value && kEngines[1].type == kEngineNames[1].value
+              && kEngines[2].type == kEngineNames[2].value);
 
 /// Names of the engines that take noise (or spots), as "a or b".
 std::string enginesTaking(bool spots)

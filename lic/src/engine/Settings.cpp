@@ -9,12 +9,6 @@
 
 namespace lic {
 
-namespace {
-constexpr EnumName<KernelType> kKernelNames[] = {{KernelType::Box, "box"}, {KernelType::Exp, "exp"}};
-} // namespace
-
-std::span<const EnumName<KernelType>> kernelNames() { return kKernelNames; }
-
 const char* toString(KernelType k) { return nameOf<KernelType>(kKernelNames, k); }
 
 KernelType kernelFromString(const std::string& s) { return valueOf<KernelType>(kKernelNames, s, "kernel"); }

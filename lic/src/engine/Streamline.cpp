@@ -8,12 +8,6 @@
 
 namespace lic {
 
-namespace {
-constexpr EnumName<Integrator> kIntegratorNames[] = {{Integrator::RK4, "rk4"}, {Integrator::RK45, "rk45"}};
-} // namespace
-
-std::span<const EnumName<Integrator>> integratorNames() { return kIntegratorNames; }
-
 const char* toString(Integrator i) { return nameOf<Integrator>(kIntegratorNames, i); }
 
 const char* toString(StopReason r)

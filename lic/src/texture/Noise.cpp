@@ -7,12 +7,6 @@
 
 namespace lic {
 
-namespace {
-constexpr EnumName<NoiseFilter> kFilterNames[] = {{NoiseFilter::Binomial, "binomial"}, {NoiseFilter::None, "none"}};
-} // namespace
-
-std::span<const EnumName<NoiseFilter>> noiseFilterNames() { return kFilterNames; }
-
 NoiseFilter noiseFilterFromString(const std::string& s)
 {
     return valueOf<NoiseFilter>(kFilterNames, s, "noise filter");

@@ -11,15 +11,6 @@ namespace lic {
 
 using openvdb::Vec3d;
 
-namespace {
-constexpr EnumName<SpotDistribution> kDistributionNames[] = {{SpotDistribution::Regular, "regular"},
-                                                             {SpotDistribution::Random, "random"},
-                                                             {SpotDistribution::Jittered, "jittered"},
-                                                             {SpotDistribution::Poisson, "poisson"}};
-} // namespace
-
-std::span<const EnumName<SpotDistribution>> spotDistributionNames() { return kDistributionNames; }
-
 const char* toString(SpotDistribution d) { return nameOf<SpotDistribution>(kDistributionNames, d); }
 
 SpotDistribution spotDistributionFromString(const std::string& s)

@@ -658,7 +658,7 @@ const std::vector<std::string>& allowedValues(const std::string& keyPath)
     static const std::map<std::string, std::vector<std::string>> table{
         {"lic.engine", [] {
              std::vector<std::string> names{"auto"};
-             for (const lic::EngineInfo& e : lic::engines()) names.emplace_back(e.name);
+             for (const std::string& n : lic::listedNames(lic::engineNames())) names.push_back(n);
              return names;
          }()},
         {"lic.kernel", lic::listedNames(lic::kernelNames())},

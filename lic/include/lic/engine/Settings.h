@@ -25,8 +25,15 @@ enum class KernelType {
     Box, ///< uniform weights over n samples each way
     Exp  ///< oriented: weights c^k over the n samples downstream (seed §7); bright heads point downstream
 };
+/// The engines' names (the engine table's names, lic/engine/Engine.h; a recipe's allowed values
+/// besides "auto"). Inline, so that readers of recipes need not link the engines.
+inline constexpr EnumName<EngineType> kEngineNames[] = {
+    {EngineType::Naive, "naive"}, {EngineType::Fast, "fast"}, {EngineType::Splat, "splat"}};
+inline std::span<const EnumName<EngineType>> engineNames() { return kEngineNames; }
+
 /// The kernels' names (a recipe's allowed values).
-std::span<const EnumName<KernelType>> kernelNames();
+inline constexpr EnumName<KernelType> kKernelNames[] = {{KernelType::Box, "box"}, {KernelType::Exp, "exp"}};
+inline std::span<const EnumName<KernelType>> kernelNames() { return kKernelNames; }
 const char* toString(KernelType);
 /// @throw lic::InputError for names other than "box" and "exp".
 KernelType kernelFromString(const std::string&);

@@ -24,7 +24,8 @@ enum class StopReason {
 };
 
 /// The integrators' names (a recipe's allowed values).
-std::span<const EnumName<Integrator>> integratorNames();
+inline constexpr EnumName<Integrator> kIntegratorNames[] = {{Integrator::RK4, "rk4"}, {Integrator::RK45, "rk45"}};
+inline std::span<const EnumName<Integrator>> integratorNames() { return kIntegratorNames; }
 const char* toString(Integrator);
 const char* toString(StopReason);
 /// @throw lic::InputError for anything but "rk4" or "rk45".

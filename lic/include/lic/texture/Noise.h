@@ -49,7 +49,8 @@ enum class NoiseFilter {
 /// @throw lic::InputError for names other than "binomial" and "none".
 NoiseFilter noiseFilterFromString(const std::string&);
 /// The filters' names (a recipe's allowed values).
-std::span<const EnumName<NoiseFilter>> noiseFilterNames();
+inline constexpr EnumName<NoiseFilter> kFilterNames[] = {{NoiseFilter::Binomial, "binomial"}, {NoiseFilter::None, "none"}};
+inline std::span<const EnumName<NoiseFilter>> noiseFilterNames() { return kFilterNames; }
 
 /// The dense noise input texture. Each output voxel has a white-noise value in [0, 1) from a hash
 /// of (seed, voxel); with NoiseFilter::Binomial the texture value of a voxel is the [¼ ½ ¼]³

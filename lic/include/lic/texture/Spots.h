@@ -27,7 +27,11 @@ enum class SpotDistribution {
     Poisson   ///< approximate Poisson-disk (Bridson's dart throwing), minimum distance kPoissonRadius·d
 };
 /// The distributions' names (a recipe's allowed values).
-std::span<const EnumName<SpotDistribution>> spotDistributionNames();
+inline constexpr EnumName<SpotDistribution> kDistributionNames[] = {{SpotDistribution::Regular, "regular"},
+                                                             {SpotDistribution::Random, "random"},
+                                                             {SpotDistribution::Jittered, "jittered"},
+                                                             {SpotDistribution::Poisson, "poisson"}};
+inline std::span<const EnumName<SpotDistribution>> spotDistributionNames() { return kDistributionNames; }
 const char* toString(SpotDistribution);
 /// @throw lic::InputError for names other than regular, random, jittered, poisson.
 SpotDistribution spotDistributionFromString(const std::string&);
