@@ -13,6 +13,8 @@
 #include "lic/field/Scalars.h"
 
 #include <gtest/gtest.h>
+#include <chrono>
+#include <tbb/parallel_for.h>
 #include <openvdb/io/File.h>
 #include <tbb/global_control.h>
 #include <tbb/task_scheduler_observer.h>
@@ -22,6 +24,7 @@
 #include <filesystem>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <set>
 
@@ -206,11 +209,31 @@ private:
     std::set<std::thread::id> mWorkers;
 };
 
+/// The one-thread check needs a process whose TBB has no workers yet (as licvdb, which sets its
+/// limit before any parallel work): a worker already inside the arena when a limit is set may still
+/// take tasks. This suite sets one thread before its set-up makes the input (CTest runs each test
+/// in a process of its own).
+class StreamBakeOneThread : public StreamBake
+{
+protected:
+    static void SetUpTestSuite()
+    {
+        sOne.emplace(tbb::global_control::max_allowed_parallelism, 1);
+        StreamBake::SetUpTestSuite();
+    }
+    static void TearDownTestSuite()
+    {
+        StreamBake::TearDownTestSuite();
+        sOne.reset();
+    }
+    static inline std::optional<tbb::global_control> sOne;
+};
+
 // `threads` bounds every parallel stage of a bake (field preparation, output domain, scalar
 // ranges, the convolution, compositing, a sequence's advection), not just the convolution: with
 // threads = 1 no TBB worker joins in at all. The control run with all cores shows the observer
 // sees workers when they do join.
-TEST_F(StreamBake, OneThreadMeansNoWorkerInAnyStage)
+TEST_F(StreamBakeOneThread, OneThreadMeansNoWorkerInAnyStage)
 {
     vdbexport::Recipe spots = spotRecipe("t1_spots.vdb");
     spots.threads = 1;
@@ -226,6 +249,7 @@ TEST_F(StreamBake, OneThreadMeansNoWorkerInAnyStage)
         vdbexport::bake(noise);
         EXPECT_EQ(counter.workers(), 0u) << "a stage ran on TBB workers although threads = 1";
     }
+    sOne.reset(); // every core again, for the control
     if (std::thread::hardware_concurrency() >= 2) {
         WorkerCounter counter;
         vdbexport::Recipe all = recipe("t0_noise.vdb");
