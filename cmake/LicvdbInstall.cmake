@@ -102,7 +102,7 @@ colour by scalars, looping animations. It includes a reference halo raycaster
 (licvdb render) and the Blender add-on zips in /usr/share/licvdb/blender.")
 # dpkg-shlibdeps finds every shared library the binary links, with versions (libopenvdb10.0,
 # libtbb12, libopenimageio2.4, libopencolorio2.1, libimath-3-1-29, libblosc1, libssl3, zlib1g,
-# libopenmpi3, libstdc++6, libc6: scripts/test-install checks them). licvdb runs nothing else
+# libopenmpi3, libvtk9.1 with VTK, libstdc++6, libc6: scripts/test-install checks them). licvdb runs nothing else
 # except mpirun for distributed bakes (openmpi-bin, suggested) and Blender for the add-on.
 set(CPACK_DEBIAN_RUNTIME_PACKAGE_SHLIBDEPS ON)
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
@@ -121,6 +121,9 @@ raycaster) and lic::vdbexport (recipes, readers, bakes to .vdb files).")
 set(_licvdb_dev_depends "licvdb (= ${PROJECT_VERSION}-1), libopenvdb-dev, libtbb-dev, libboost-iostreams-dev, libimath-dev, nlohmann-json3-dev, libopenimageio-dev, openimageio-tools, libopencv-dev, libopencolorio-dev, libssl-dev, zlib1g-dev, libblosc-dev")
 if(LICVDB_MPI)
   string(APPEND _licvdb_dev_depends ", libopenmpi-dev")
+endif()
+if(LICVDB_VTK)
+  string(APPEND _licvdb_dev_depends ", libvtk9-dev")
 endif()
 set(CPACK_DEBIAN_DEVELOPMENT_PACKAGE_DEPENDS "${_licvdb_dev_depends}")
 set(CPACK_DEBIAN_DEVELOPMENT_PACKAGE_SHLIBDEPS OFF)

@@ -112,8 +112,10 @@ void BakeCommand::addColorFlags()
 void BakeCommand::addFieldFlags()
 {
     RecipeFlags& f = *mFlags;
-    f.option<std::string>("--format", "field.format", "Field format: auto|vdb|npy|vti|vtk|raw [auto: by extension]");
-    f.option<double>("--voxel-size", "field.voxel_size", "Dense inputs (npy, raw, vti, vtk): world units per voxel [file's, else 1]");
+    f.option<std::string>("--format", "field.format", "Field format: auto|vdb|npy|vti|vtk|raw|vtu|vts|vtm|vtpc|pvd|vtk-mesh|plot3d|openfoam [auto: by extension]");
+    f.option<double>("--voxel-size", "field.voxel_size", "Dense inputs (npy, raw, vti, vtk): world units per voxel [file's, else 1]; meshes: the lattice's voxel size [median cell size]");
+    f.option<double>("--time", "field.time", "A series (.pvd, OpenFOAM case): the time to read [the latest]");
+    f.text("--solution", "field.solution", "PLOT3D: the solution (.q) file [the grid's name with .q]");
     f.text("--origin", "field.origin", "Dense inputs: world position X,Y,Z of voxel (0,0,0)'s centre [file's, else 0]",
            numbers("--origin", "X,Y,Z", 3));
     f.text("--shape", "field.shape", "Raw input: X,Y,Z voxels (data is X,Y,Z,3 in C order)",
@@ -206,10 +208,18 @@ void BakeCommand::report(const json& summary, const Recipe& recipe, const MpiSes
     if (mCommon.json) {
         std::cout << summary.dump(2) << "\n";
     } else if (!mCommon.quiet) {
-        std::fprintf(stderr, "wrote %s (%llu voxels, %.2f s%s)\n", recipe.output.path.c_str(),
-                     (unsigned long long)summary["output_voxels"].get<std::uint64_t>(),
-                     summary["seconds"]["total"].get<double>(),
-                     mpi.distributed() ? (", " + std::to_string(mpi.size()) + " ranks").c_str() : "");
+        const std::string ranks = mpi.distributed() ? ", " + std::to_string(mpi.size()) + " ranks" : "";
+        if (summary.contains("output_voxels")) {
+            std::fprintf(stderr, "wrote %s (%llu voxels, %.2f s%s)\n", recipe.output.path.c_str(),
+                         (unsigned long long)summary["output_voxels"].get<std::uint64_t>(),
+                         summary["seconds"]["total"].get<double>(), ranks.c_str());
+        } else { // a sequence (an unsteady field): its frames' files and the manifest
+            const json& files = summary.at("files");
+            std::fprintf(stderr, "wrote %zu frames, %s .. %s, and %s (%.2f s%s)\n", files.size(),
+                         files.front().get<std::string>().c_str(), files.back().get<std::string>().c_str(),
+                         summary.contains("manifest") && summary["manifest"].is_string() ? summary["manifest"].get<std::string>().c_str() : "no manifest",
+                         summary["seconds"]["total"].get<double>(), ranks.c_str());
+        }
     }
 }
 

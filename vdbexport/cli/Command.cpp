@@ -8,8 +8,9 @@ namespace vdbexport::cli {
 
 namespace {
 
-const std::array<CommandEntry, 6> kCommands{{
+const std::array<CommandEntry, 7> kCommands{{
     {"field", "Write an analytic example vector field", makeFieldCommand},
+    {"convert", "Resample a CFD mesh (VTK, PLOT3D, OpenFOAM) or any field to a .vdb", makeConvertCommand},
     {"bake", "Bake a LIC volume from a vector field", makeBakeCommand},
     {"render", "Raycast a baked .vdb to an image (reference halo renderer)", makeRenderCommand},
     {"info", "List the grids, bounding boxes and metadata of a .vdb", makeInfoCommand},

@@ -77,7 +77,7 @@ struct CommandEntry
     bool helpTopic = true;   ///< named in `licvdb help`'s list of commands
 };
 
-/// Every command of licvdb in synopsis order: field, bake, render, info, help, version.
+/// Every command of licvdb in synopsis order: field, convert, bake, render, info, help, version.
 std::span<const CommandEntry> commandTable();
 
 /// The commands that have help of their own, as prose: "field, bake, render or info".
@@ -92,6 +92,7 @@ bool inReadChild();
 std::string synopsis(CLI::App& app);
 
 std::unique_ptr<Command> makeFieldCommand();
+std::unique_ptr<Command> makeConvertCommand();
 std::unique_ptr<Command> makeBakeCommand();
 std::unique_ptr<Command> makeRenderCommand();
 std::unique_ptr<Command> makeInfoCommand();

@@ -107,7 +107,8 @@ template <> struct Schema<FieldSpec>
             field("dtype", &FieldSpec::dtype), field("resample", &FieldSpec::resample),
             field("crop", &FieldSpec::crop), field("mask", &FieldSpec::mask),
             field("nan_policy", &FieldSpec::nanPolicy), field("frames", &FieldSpec::frames),
-            field("fps", &FieldSpec::fps));
+            field("fps", &FieldSpec::fps), field("time", &FieldSpec::time),
+            field("solution", &FieldSpec::solution));
     }
 };
 template <> struct Schema<OutputSpec>
@@ -496,6 +497,7 @@ void Recipe::validate() const
     checkChoice("field.nan_policy", field.nanPolicy);
     if (field.voxelSize) checkPositive("field.voxel_size", *field.voxelSize);
     if (field.resample) checkPositive("field.resample", *field.resample);
+    if (field.time && !std::isfinite(*field.time)) violation("field.time", "a finite time", fmt(*field.time));
     if (field.origin) {
         for (std::size_t a = 0; a < 3; ++a) {
             const double v = (*field.origin)[a];
@@ -668,7 +670,7 @@ const std::vector<std::string>& allowedValues(const std::string& keyPath)
         {"input.noise_filter", lic::listedNames(lic::noiseFilterNames())},
         {"roi.mode", {"pre", "post"}},
         {"output.contrast", {"stretch", "none"}},
-        {"field.format", {"auto", "vdb", "npy", "vti", "vtk", "raw"}},
+        {"field.format", {"auto", "vdb", "npy", "vti", "vtk", "raw", "vtu", "vts", "vtm", "vtpc", "pvd", "vtk-mesh", "plot3d", "openfoam"}},
         {"field.dtype", {"float32", "float64", "f4", "f8", "<f4", "<f8", ">f4", ">f8"}},
         {"field.mask", {"none", "zero"}},
         {"field.nan_policy", {"refuse", "zero"}},

@@ -1,5 +1,6 @@
 // loadField(): the single entry point that reads a bake's field in any supported format.
 #include "vdbexport/io/FieldInput.h"
+#include "vdbexport/io/MeshInput.h"
 #include "vdbexport/io/VdbIO.h"
 
 #include "io/DenseCommon.h"
@@ -85,7 +86,12 @@ typename GridT::Ptr fillGrid(const std::array<std::int64_t, 3>& dims, Get&& get)
 
 std::string formatFromPath(const std::string& path)
 {
+    std::error_code ec;
+    if (fs::is_directory(path, ec) && fs::exists(fs::path(path) / "system" / "controlDict", ec)) return "openfoam";
     const std::string ext = lower(fs::path(path).extension().string());
+    if (fs::path(path).filename() == "controlDict" || ext == ".foam") return "openfoam";
+    if (ext == ".vtu" || ext == ".vts" || ext == ".vtm" || ext == ".vtpc" || ext == ".pvd") return ext.substr(1);
+    if (ext == ".xyz" || ext == ".p3d" || ext == ".x") return "plot3d";
     if (ext == ".vdb") return "vdb";
     if (ext == ".npy") return "npy";
     if (ext == ".vti") return "vti";
@@ -150,13 +156,59 @@ void denseToGrids(const DenseImage& image, const std::string& vectorName, const 
     }
 }
 
-LoadedField loadField(const FieldSpec& spec)
+bool isLegacyVtkMesh(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    std::string head(1024, '\0');
+    in.read(head.data(), std::streamsize(head.size()));
+    head.resize(std::size_t(in.gcount()));
+    const std::string upper = [&] {
+        std::string u = head;
+        for (auto& c : u) c = char(std::toupper(static_cast<unsigned char>(c)));
+        return u;
+    }();
+    const auto at = upper.find("DATASET");
+    if (at == std::string::npos) return false;
+    const auto type = upper.substr(at + 7, 40);
+    return type.find("UNSTRUCTURED_GRID") != std::string::npos || type.find(" STRUCTURED_GRID") != std::string::npos
+           || type.find("RECTILINEAR_GRID") != std::string::npos;
+}
+
+LoadedField loadField(const FieldSpec& spec) { return loadField(spec, lic::nullProgress()); }
+
+LoadedField loadField(const FieldSpec& spec, lic::Progress& progress)
 {
     openvdb::initialize();
     LoadedField out;
     const std::string& path = spec.path;
     out.format = spec.format.empty() || spec.format == "auto" ? formatFromPath(path) : spec.format;
-    if (out.format == "vdb") {
+    if (out.format == "vtk" && isLegacyVtkMesh(path)) out.format = "vtk-mesh";
+    if (out.format != "plot3d" && !spec.solution.empty())
+        throw lic::InputError("field.solution (--solution) names a PLOT3D .q file; " + q(path) + " is not PLOT3D");
+    if (isMeshFormat(out.format)) {
+        if (spec.origin || spec.shape)
+            throw lic::InputError("field.origin / field.shape (--origin, --shape) apply to dense inputs; the mesh "
+                                  + q(path) + " carries its own coordinates");
+        MeshOptions options;
+        options.vectorName = spec.grid;
+        options.voxelSize = spec.voxelSize;
+        options.crop = spec.crop;
+        options.time = spec.time;
+        options.solution = spec.solution;
+        std::uint64_t done = 0;
+        options.progress = [&progress, &done](double fraction) {
+            const auto units = std::uint64_t(std::clamp(fraction, 0.0, 1.0) * 1000);
+            if (units > done) progress.advance(units - done);
+            done = std::max(done, units);
+            return !progress.wasInterrupted();
+        };
+        progress.begin("resampling the mesh", 1000);
+        out = loadMesh(path, out.format, options, spec.nanPolicy);
+        progress.end();
+    } else if (spec.time) {
+        throw lic::InputError("field.time (--time) picks a time of a series (.pvd, an OpenFOAM case); " + q(path)
+                              + " is a single field");
+    } else if (out.format == "vdb") {
         if (spec.voxelSize || spec.origin)
             throw lic::InputError("field.voxel_size / field.origin (--voxel-size, --origin) apply to dense inputs (npy, vti, "
                                   "vtk, raw); a .vdb file carries its own transform (use --resample to change the voxel size)");

@@ -21,11 +21,18 @@ struct FieldSpec
 {
     std::string path; ///< `path`: field file (VDB, ...); may be empty until the CLI sets it
     std::string grid; ///< `grid`: vector grid name; "" picks the default grid
-    /// `format`: "auto" (by extension) | "vdb" | "npy" | "vti" | "vtk" | "raw"
+    /// `format`: "auto" (by extension; a directory with system/controlDict is OpenFOAM) | "vdb" |
+    /// "npy" | "vti" | "vtk" | "raw" | meshes (docs/inputs.md): "vtu" | "vts" | "vtm" | "vtpc" |
+    /// "pvd" | "vtk-mesh" | "plot3d" | "openfoam"
     std::string format = "auto";
     /// `voxel_size`: world units per voxel of a dense input (npy, raw; overrides a VTK file's
-    /// spacing), > 0; null = the file's own, else 1
+    /// spacing), > 0; null = the file's own, else 1. For a mesh: the lattice it is resampled
+    /// onto; null = its median cell size
     std::optional<double> voxelSize;
+    /// `time`: the time of a series (.pvd, OpenFOAM case) to read; null = the latest
+    std::optional<double> time;
+    /// `solution`: a PLOT3D solution (.q) file; "" = the grid's path with .q
+    std::string solution;
     /// `origin`: world position of voxel (0,0,0)'s centre for dense inputs; null = the file's, else 0
     std::optional<std::array<double, 3>> origin;
     /// `shape`: [X, Y, Z] voxels of a raw input (required for raw), each >= 1

@@ -9,6 +9,8 @@
 
 #include "vdbexport/bake/Recipe.h"
 
+#include <lic/util/Progress.h>
+
 #include <openvdb/openvdb.h>
 
 #include <array>
@@ -91,7 +93,7 @@ struct LoadedField
     openvdb::Vec3SGrid::Ptr velocity;                        ///< the prepared field
     std::map<std::string, openvdb::FloatGrid::Ptr> scalars;  ///< other scalar grids of the file, by name
     std::string gridName;                                    ///< name of the velocity grid or array
-    std::string format;                                      ///< "vdb", "npy", "vti", "vtk", "raw"
+    std::string format;                                      ///< "vdb", "npy", "vti", "vtk", "raw", a mesh format
     std::uint64_t nonFiniteReplaced = 0;                     ///< NaN/Inf values set to 0 (nan_policy zero)
     std::vector<std::string> notes;                          ///< what preparation did, for stderr
 };
@@ -101,6 +103,8 @@ struct LoadedField
 ///        then prepareField(). Scalar grids of the same file are returned for colour/ROI/width.
 /// @throw lic::InputError naming the file and the problem (see each reader, and prepareField).
 LoadedField loadField(const FieldSpec& spec);
+/// The same, reporting a mesh's resampling (the long part of a large mesh) to `progress`.
+LoadedField loadField(const FieldSpec& spec, lic::Progress& progress);
 
 /// @brief Field preparation, in this order: NaN/Inf policy (refuse: throw with the count and the
 ///        first voxel and world position; zero: replace with 0), crop to a world-space box,

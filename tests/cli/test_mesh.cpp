@@ -1,0 +1,481 @@
+// Mesh input (vdbexport/io/MeshInput.h) against closed forms: one analytic flow (solid rotation plus
+// an axial profile in an annulus) written as hexahedral and tetrahedral .vtu, a curvilinear .vts,
+// PLOT3D and an OpenFOAM case, resampled, and compared with the formula at the voxels: mean
+// relative error <= 1%, the interior covered, the exterior (outside, and the hole) inactive, the
+// vorticity 2Ω. Then `licvdb convert` (series, metadata, --list), `bake` reading a mesh, bit-
+// identical output for 1 and 2 threads, and the bad inputs (exit 2, a message, no file).
+#include "InputsHarness.h"
+#include "MeshSamples.h"
+
+#include "vdbexport/io/FieldInput.h"
+#include "vdbexport/io/MeshInput.h"
+#include "vdbexport/io/VdbIO.h"
+
+#include <lic/util/Error.h>
+
+#include <openvdb/tools/GridOperators.h>
+#include <tbb/global_control.h>
+
+#include <set>
+
+using namespace inputs_test;
+using namespace mesh_test;
+
+namespace {
+
+struct Accuracy
+{
+    std::uint64_t active = 0;
+    double relError = 0;        ///< Σ|u - exact| / Σ|exact| over the active voxels
+    double interiorCovered = 0; ///< active fraction of the voxels well inside the annulus
+    std::uint64_t exteriorActive = 0; ///< active voxels clearly outside it (or in its hole)
+    std::uint64_t exteriorVoxels = 0;
+};
+
+/// Compare a resampled field with the flow. `margin`: how far inside the annulus a voxel must be to
+/// count as interior (the mesh's boundary is stair-stepped or polygonal).
+Accuracy accuracy(const openvdb::Vec3SGrid& g, double margin, double omega = kOmega)
+{
+    Accuracy a;
+    double err = 0, norm = 0;
+    const auto& xf = g.transform();
+    for (auto it = g.cbeginValueOn(); it; ++it) {
+        const openvdb::Vec3d p = xf.indexToWorld(it.getCoord());
+        const openvdb::Vec3d exact = flow(p, omega);
+        err += (openvdb::Vec3d(*it) - exact).length();
+        norm += exact.length();
+        ++a.active;
+    }
+    a.relError = norm > 0 ? err / norm : 1;
+    // Every voxel centre of the lattice around the mesh.
+    const openvdb::CoordBBox box = g.evalActiveVoxelBoundingBox().expandBy(3), unused = box;
+    (void)unused;
+    std::uint64_t interior = 0, covered = 0;
+    auto acc = g.getConstAccessor();
+    for (auto c = box.begin(); c; ++c) {
+        const openvdb::Vec3d p = xf.indexToWorld(*c);
+        const double r = std::sqrt(p.x() * p.x() + p.y() * p.y());
+        const bool active = acc.isValueOn(*c);
+        if (r > kInner + margin && r < kOuter - margin && p.z() > margin && p.z() < kHeight - margin) {
+            ++interior;
+            covered += active;
+        }
+        if (r > kOuter + 0.01 || r < kInner - 0.01 || p.z() < -0.01 || p.z() > kHeight + 0.01) {
+            ++a.exteriorVoxels;
+            a.exteriorActive += active;
+        }
+    }
+    a.interiorCovered = interior ? double(covered) / double(interior) : 0;
+    return a;
+}
+
+void expectAccurate(const vdbexport::LoadedField& f, double margin, const std::string& what, double omega = kOmega)
+{
+    SCOPED_TRACE(what);
+    ASSERT_TRUE(f.velocity);
+    const Accuracy a = accuracy(*f.velocity, margin, omega);
+    EXPECT_GT(a.active, 1000u);
+    EXPECT_LE(a.relError, 0.01) << "mean relative error";
+    EXPECT_EQ(a.interiorCovered, 1.0) << "interior voxels inactive";
+    EXPECT_GT(a.exteriorVoxels, 1000u);
+    EXPECT_EQ(a.exteriorActive, 0u) << "voxels outside the mesh (or in its hole) active";
+    for (const auto& n : f.notes) std::cout << "  " << what << ": " << n << "\n";
+    std::cout << "  " << what << ": mean relative error " << a.relError << ", " << a.active << " active voxels\n";
+}
+
+vdbexport::LoadedField load(const fs::path& path, double voxelSize, const std::string& format = "auto")
+{
+    vdbexport::FieldSpec spec;
+    spec.path = path.string();
+    spec.format = format;
+    spec.voxelSize = voxelSize;
+    return vdbexport::loadField(spec);
+}
+
+/// Mean of the z component of the curl over voxels whose six neighbours are active.
+double meanCurlZ(const openvdb::Vec3SGrid& g)
+{
+    auto curl = openvdb::tools::curl(g);
+    auto acc = g.getConstAccessor();
+    double sum = 0;
+    std::uint64_t n = 0;
+    for (auto it = g.cbeginValueOn(); it; ++it) {
+        const openvdb::Coord c = it.getCoord();
+        bool inner = true;
+        for (int a = 0; a < 3; ++a)
+            for (int s : {-2, -1, 1, 2}) {
+                openvdb::Coord d = c;
+                d[a] += s;
+                inner = inner && acc.isValueOn(d);
+            }
+        if (!inner) continue;
+        sum += curl->tree().getValue(c).z();
+        ++n;
+    }
+    EXPECT_GT(n, 100u);
+    return n ? sum / double(n) : 0;
+}
+
+class MeshTest : public InputsTest
+{
+};
+
+} // namespace
+
+TEST_F(MeshTest, HexahedralVtuMatchesTheFlow)
+{
+    writeVtu(hexAnnulus(24), work("hex.vtu"));
+    const auto f = load(work("hex.vtu"), 0.04);
+    expectAccurate(f, 0.16, "hex .vtu");
+    EXPECT_EQ(f.format, "vtu");
+    EXPECT_EQ(f.gridName, "U");
+    ASSERT_TRUE(f.scalars.count("speed"));
+    EXPECT_EQ(f.scalars.at("speed")->activeVoxelCount(), f.velocity->activeVoxelCount());
+    EXPECT_NEAR(meanCurlZ(*f.velocity), 2 * kOmega, 0.02 * 2 * kOmega) << "vorticity of a rotation is 2Ω";
+}
+
+TEST_F(MeshTest, TetrahedralVtuMatchesTheFlow)
+{
+    const auto tets = tetAnnulus(24);
+    ASSERT_GT(tets->GetNumberOfCells(), 0);
+    EXPECT_EQ(tets->GetCellType(0), VTK_TETRA);
+    writeVtu(tets, work("tet.vtu"));
+    const auto f = load(work("tet.vtu"), 0.04);
+    expectAccurate(f, 0.16, "tet .vtu");
+    EXPECT_NEAR(meanCurlZ(*f.velocity), 2 * kOmega, 0.02 * 2 * kOmega);
+}
+
+TEST_F(MeshTest, CurvilinearVtsMatchesTheFlow)
+{
+    writeVts(structuredAnnulus({12, 73, 12}), work("ogrid.vts"));
+    const auto f = load(work("ogrid.vts"), 0.04);
+    expectAccurate(f, 0.03, "curvilinear .vts");
+    EXPECT_NEAR(meanCurlZ(*f.velocity), 2 * kOmega, 0.02 * 2 * kOmega);
+}
+
+TEST_F(MeshTest, Plot3dMatchesTheFlow)
+{
+    writePlot3d({12, 73, 12}, work("ogrid.xyz"), work("ogrid.q"));
+    const auto f = load(work("ogrid.xyz"), 0.04);
+    EXPECT_EQ(f.format, "plot3d");
+    expectAccurate(f, 0.03, "PLOT3D");
+    EXPECT_TRUE(f.scalars.count("Density"));
+}
+
+TEST_F(MeshTest, OpenFoamCaseMatchesTheFlow)
+{
+    // A box: every voxel of it is interior; the annulus' exterior checks do not apply.
+    writeOpenFoamCase(work("case"), 20, {"0"}, {kOmega});
+    const auto f = load(work("case"), 0.05);
+    EXPECT_EQ(f.format, "openfoam");
+    ASSERT_TRUE(f.velocity);
+    double err = 0, norm = 0;
+    for (auto it = f.velocity->cbeginValueOn(); it; ++it) {
+        const auto exact = flow(f.velocity->transform().indexToWorld(it.getCoord()));
+        err += (openvdb::Vec3d(*it) - exact).length();
+        norm += exact.length();
+    }
+    const openvdb::Coord dim = f.velocity->evalActiveVoxelDim();
+    EXPECT_EQ(f.velocity->activeVoxelCount(), openvdb::Index64(41) * 41 * 41) << dim; // [-1,1]²×[0,2] at 0.05
+    EXPECT_LE(err / norm, 0.01) << "mean relative error";
+    EXPECT_NEAR(meanCurlZ(*f.velocity), 2 * kOmega, 0.02 * 2 * kOmega);
+    std::cout << "  OpenFOAM: mean relative error " << err / norm << "\n";
+}
+
+TEST_F(MeshTest, VoxelSizeDefaultsToTheMedianCellSize)
+{
+    writeVtu(hexAnnulus(20), work("hex.vtu"));
+    vdbexport::MeshOptions o;
+    const auto s = vdbexport::describeMesh(work("hex.vtu").string(), "vtu", o);
+    EXPECT_NEAR(s.medianCellSize, std::cbrt(0.1 * 0.1 * 0.1), 1e-9); // 2/20 wide, 2/20 tall
+    const auto f = vdbexport::loadMesh(work("hex.vtu").string(), "vtu", o);
+    EXPECT_NEAR(f.velocity->voxelSize()[0], s.medianCellSize, 1e-12);
+    EXPECT_GT(s.cells, 1000u);
+    std::set<std::string> names;
+    for (const auto& a : s.arrays) names.insert(a.name);
+    EXPECT_EQ(names, (std::set<std::string>{"U", "speed"}));
+}
+
+TEST_F(MeshTest, CellDataAreAveragedToPoints)
+{
+    // U on the cells only: the resampled field is still within 2% (averaging smooths the linear part
+    // exactly inside and costs accuracy only at the boundary) and continuous.
+    auto grid = hexAnnulus(24);
+    auto cellU = vectorArray("velocity", grid->GetNumberOfCells());
+    for (vtkIdType c = 0; c < grid->GetNumberOfCells(); ++c) {
+        double b[6];
+        grid->GetCellBounds(c, b);
+        const auto v = flow({0.5 * (b[0] + b[1]), 0.5 * (b[2] + b[3]), 0.5 * (b[4] + b[5])});
+        cellU->SetTuple3(c, v.x(), v.y(), v.z());
+    }
+    grid->GetPointData()->Initialize();
+    grid->GetCellData()->AddArray(cellU);
+    writeVtu(grid, work("cells.vtu"));
+    const auto f = load(work("cells.vtu"), 0.04);
+    EXPECT_EQ(f.gridName, "velocity");
+    const Accuracy a = accuracy(*f.velocity, 0.16);
+    EXPECT_LE(a.relError, 0.02);
+    EXPECT_EQ(a.exteriorActive, 0u);
+    bool noted = false;
+    for (const auto& n : f.notes) noted = noted || n.find("cell data") != std::string::npos;
+    EXPECT_TRUE(noted);
+}
+
+TEST_F(MeshTest, SameOutputForOneAndTwoThreads)
+{
+    writeVtu(tetAnnulus(16), work("tet.vtu"));
+    auto loadWith = [&](int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+        return load(work("tet.vtu"), 0.05);
+    };
+    const auto one = loadWith(1), two = loadWith(2);
+    ASSERT_EQ(one.velocity->activeVoxelCount(), two.velocity->activeVoxelCount());
+    auto acc = two.velocity->getConstAccessor();
+    std::uint64_t differ = 0;
+    for (auto it = one.velocity->cbeginValueOn(); it; ++it) {
+        const openvdb::Vec3s b = acc.getValue(it.getCoord());
+        differ += !(acc.isValueOn(it.getCoord()) && std::memcmp(&b, &*it, sizeof b) == 0);
+    }
+    EXPECT_EQ(differ, 0u);
+}
+
+TEST_F(MeshTest, ConvertWritesVelocityScalarsAndMetadata)
+{
+    writeVtu(hexAnnulus(16), work("hex.vtu"));
+    const RunResult r = run({"convert", work("hex.vtu").string(), "--out", work("hex.vdb").string(), "--voxel-size", "0.05", "--json"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j["files"].size(), 1u);
+    openvdb::io::File file(work("hex.vdb").string());
+    file.open();
+    auto vel = openvdb::gridPtrCast<openvdb::Vec3SGrid>(file.readGrid("velocity"));
+    ASSERT_TRUE(vel);
+    EXPECT_EQ(vel->metaValue<std::string>("source_array"), "U");
+    EXPECT_EQ(vel->metaValue<std::string>("source_format"), "vtu");
+    EXPECT_NE(vel->metaValue<std::string>("source").find("hex.vtu"), std::string::npos);
+    EXPECT_NEAR(vel->voxelSize()[0], 0.05, 1e-12);
+    auto speed = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid("speed"));
+    ASSERT_TRUE(speed);
+    EXPECT_EQ(speed->activeVoxelCount(), vel->activeVoxelCount());
+    EXPECT_LE(accuracy(*vel, 0.2).relError, 0.01);
+}
+
+TEST_F(MeshTest, PvdOfTwoStepsIsATwoFrameSequence)
+{
+    writeVtu(hexAnnulus(16, 0.5), work("flow_0.vtu"));
+    writeVtu(hexAnnulus(16, 1.0), work("flow_1.vtu"));
+    writeBytes(work("flow.pvd"), "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n"
+                                 "<DataSet timestep=\"0\" part=\"0\" file=\"flow_0.vtu\"/>\n"
+                                 "<DataSet timestep=\"0.25\" part=\"0\" file=\"flow_1.vtu\"/>\n</Collection>\n</VTKFile>\n");
+    EXPECT_EQ(vdbexport::meshTimes(work("flow.pvd").string(), "pvd"), (std::vector<double>{0, 0.25}));
+    const RunResult r = run({"convert", work("flow.pvd").string(), "--out", work("seq_####.vdb").string(), "--voxel-size", "0.05"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    for (int k = 0; k < 2; ++k) {
+        const fs::path p = work("seq_000" + std::to_string(k) + ".vdb");
+        ASSERT_TRUE(fs::exists(p)) << p;
+        openvdb::io::File file(p.string());
+        file.open();
+        auto vel = openvdb::gridPtrCast<openvdb::Vec3SGrid>(file.readGrid("velocity"));
+        EXPECT_DOUBLE_EQ(vel->metaValue<double>("source_time"), k == 0 ? 0.0 : 0.25);
+        EXPECT_LE(accuracy(*vel, 0.2, k == 0 ? 0.5 : 1.0).relError, 0.01) << "frame " << k;
+    }
+    // The sequence bakes as an unsteady field.
+    const RunResult b = run(bakeArgs(work("seq_####.vdb"), work("lic.vdb"), {"--field-frames", "0,1"}));
+    ASSERT_EQ(b.code, 0) << b.describe();
+    EXPECT_TRUE(fs::exists(work("lic_0000.vdb")));
+    EXPECT_TRUE(fs::exists(work("lic_0001.vdb")));
+}
+
+TEST_F(MeshTest, OpenFoamTimesAndList)
+{
+    writeOpenFoamCase(work("case"), 8, {"0", "0.5"}, {0.5, 1.0});
+    const RunResult l = run({"convert", work("case").string(), "--list", "--json"});
+    ASSERT_EQ(l.code, 0) << l.describe();
+    const auto j = nlohmann::json::parse(l.out);
+    EXPECT_EQ(j["format"], "openfoam");
+    EXPECT_EQ(j["cells"], 512);
+    EXPECT_EQ(j["times"], nlohmann::json::parse("[0, 0.5]"));
+    EXPECT_EQ(j["time"], 0.5); // the latest by default
+    // --time 0 reads the first step (rotation 0.5), the default the latest (1.0).
+    vdbexport::FieldSpec spec;
+    spec.path = work("case").string();
+    spec.voxelSize = 0.1;
+    spec.time = 0.0;
+    const auto first = vdbexport::loadField(spec);
+    spec.time.reset();
+    const auto latest = vdbexport::loadField(spec);
+    const openvdb::Coord c = first.velocity->transform().worldToIndexCellCentered(openvdb::Vec3d(0.5, 0, 1));
+    EXPECT_NEAR(first.velocity->tree().getValue(c).y(), 0.25, 0.01);
+    EXPECT_NEAR(latest.velocity->tree().getValue(c).y(), 0.5, 0.01);
+}
+
+TEST_F(MeshTest, BakeReadsAMeshDirectly)
+{
+    writeVtu(hexAnnulus(16), work("hex.vtu"));
+    const RunResult r = run(bakeArgs(work("hex.vtu"), work("lic.vdb"), {"--voxel-size", "0.05", "--json"}));
+    ASSERT_EQ(r.code, 0) << r.describe();
+    openvdb::io::File file(work("lic.vdb").string());
+    file.open();
+    auto density = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid("density"));
+    ASSERT_TRUE(density);
+    EXPECT_GT(density->activeVoxelCount(), 1000u);
+    // The hole stays empty in the bake too.
+    std::uint64_t inHole = 0;
+    for (auto it = density->cbeginValueOn(); it; ++it) {
+        const auto p = density->transform().indexToWorld(it.getCoord());
+        inHole += std::hypot(p.x(), p.y()) < kInner - 0.05;
+    }
+    EXPECT_EQ(inHole, 0u);
+}
+
+// ---- bad input: exit 2, a message naming the problem, no file -------------------------------
+
+namespace {
+
+struct BadMesh
+{
+    std::string name;
+    std::function<std::vector<std::string>(const fs::path&)> setup;
+    std::vector<std::string> words;
+};
+
+std::string truncated(const fs::path& p)
+{
+    std::ifstream in(p, std::ios::binary);
+    std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    return s.substr(0, s.size() / 2);
+}
+
+const std::vector<BadMesh>& badMeshes()
+{
+    static const std::vector<BadMesh> all = {
+        {"truncated vtu", [](const fs::path& w) {
+             writeVtu(hexAnnulus(8), w / "full.vtu");
+             writeBytes(w / "cut.vtu", truncated(w / "full.vtu"));
+             fs::remove(w / "full.vtu");
+             return std::vector<std::string>{"convert", (w / "cut.vtu").string(), "--out", (w / "o.vdb").string()};
+         }, {"cut.vtu", "cannot be read"}},
+        {"wrong tuple count", [](const fs::path& w) {
+             auto g = hexAnnulus(6);
+             auto shortU = vectorArray("U", g->GetNumberOfPoints() - 5);
+             g->GetPointData()->RemoveArray("U");
+             g->GetPointData()->AddArray(shortU);
+             writeVtu(g, w / "short.vtu", true);
+             return std::vector<std::string>{"convert", (w / "short.vtu").string(), "--out", (w / "o.vdb").string()};
+         }, {"short.vtu", "\"u\"", "too short"}},
+        {"no velocity array", [](const fs::path& w) {
+             auto g = hexAnnulus(6);
+             g->GetPointData()->RemoveArray("U");
+             writeVtu(g, w / "scalar.vtu");
+             return std::vector<std::string>{"convert", (w / "scalar.vtu").string(), "--out", (w / "o.vdb").string()};
+         }, {"scalar.vtu", "no 3-component array", "speed"}},
+        {"named array missing", [](const fs::path& w) {
+             writeVtu(hexAnnulus(6), w / "m.vtu");
+             return std::vector<std::string>{"bake", "--field", (w / "m.vtu").string(), "--grid", "vel", "--out", (w / "o.vdb").string()};
+         }, {"no array named 'vel'", "U (3)"}},
+        {"NaN velocity", [](const fs::path& w) {
+             auto g = hexAnnulus(6);
+             g->GetPointData()->GetArray("U")->SetComponent(7, 1, std::nan(""));
+             writeVtu(g, w / "nan.vtu");
+             return std::vector<std::string>{"convert", (w / "nan.vtu").string(), "--out", (w / "o.vdb").string()};
+         }, {"nan.vtu", "NaN/Inf", "point 7"}},
+        {"NaN point", [](const fs::path& w) {
+             auto g = hexAnnulus(6);
+             g->GetPoints()->SetPoint(3, std::nan(""), 0, 0);
+             writeVtu(g, w / "nanpt.vtu");
+             return std::vector<std::string>{"convert", (w / "nanpt.vtu").string(), "--out", (w / "o.vdb").string()};
+         }, {"nanpt.vtu", "point 3", "NaN/Inf coordinate"}},
+        {"flat mesh", [](const fs::path& w) {
+             auto g = hexAnnulus(6);
+             for (vtkIdType i = 0; i < g->GetNumberOfPoints(); ++i) {
+                 double p[3];
+                 g->GetPoint(i, p);
+                 g->GetPoints()->SetPoint(i, p[0], p[1], 0.0);
+             }
+             writeVtu(g, w / "flat.vtu");
+             return std::vector<std::string>{"convert", (w / "flat.vtu").string(), "--out", (w / "o.vdb").string()};
+         }, {"flat.vtu", "zero extent along z"}},
+        {"no cells", [](const fs::path& w) {
+             vtkNew<vtkUnstructuredGrid> g;
+             vtkNew<vtkPoints> pts;
+             pts->InsertNextPoint(0, 0, 0);
+             g->SetPoints(pts);
+             writeVtu(g, w / "empty.vtu");
+             return std::vector<std::string>{"convert", (w / "empty.vtu").string(), "--out", (w / "o.vdb").string()};
+         }, {"empty.vtu", "no cells"}},
+        {"not xml", [](const fs::path& w) {
+             writeBytes(w / "junk.vtu", "this is not a VTK file\n");
+             return std::vector<std::string>{"bake", "--field", (w / "junk.vtu").string(), "--out", (w / "o.vdb").string()};
+         }, {"junk.vtu", "cannot be read"}},
+        {"absurd voxel count", [](const fs::path& w) {
+             writeVtu(hexAnnulus(6), w / "a.vtu");
+             return std::vector<std::string>{"convert", (w / "a.vtu").string(), "--voxel-size", "0.0001", "--out", (w / "o.vdb").string()};
+         }, {"a.vtu", "more than the limit", "--voxel-size"}},
+        {"OpenFOAM without U", [](const fs::path& w) {
+             writeOpenFoamCase(w / "case", 4, {"0"}, {0.5}, false);
+             return std::vector<std::string>{"convert", (w / "case").string(), "--out", (w / "o.vdb").string()};
+         }, {"case", "no 3-component array", "p (1)"}},
+        {"OpenFOAM time missing", [](const fs::path& w) {
+             writeOpenFoamCase(w / "case", 4, {"0"}, {0.5});
+             return std::vector<std::string>{"convert", (w / "case").string(), "--time", "7", "--out", (w / "o.vdb").string()};
+         }, {"no time 7", "its times are 0"}},
+        {"directory without a case", [](const fs::path& w) {
+             fs::create_directories(w / "notacase");
+             return std::vector<std::string>{"convert", (w / "notacase").string(), "--format", "openfoam", "--out", (w / "o.vdb").string()};
+         }, {"notacase", "system/controlDict"}},
+        {"PLOT3D without its solution", [](const fs::path& w) {
+             writePlot3d({6, 13, 6}, w / "g.xyz", w / "g.q");
+             fs::remove(w / "g.q");
+             return std::vector<std::string>{"convert", (w / "g.xyz").string(), "--out", (w / "o.vdb").string()};
+         }, {"g.q", "not found", "solution"}},
+        {"truncated PLOT3D solution", [](const fs::path& w) {
+             writePlot3d({6, 13, 6}, w / "g.xyz", w / "full.q");
+             writeBytes(w / "g.q", truncated(w / "full.q"));
+             fs::remove(w / "full.q");
+             return std::vector<std::string>{"convert", (w / "g.xyz").string(), "--out", (w / "o.vdb").string()};
+         }, {"g.xyz", "cannot be read"}},
+        {"pvd naming a missing file", [](const fs::path& w) {
+             writeBytes(w / "s.pvd", "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\"><Collection>"
+                                     "<DataSet timestep=\"0\" file=\"gone.vtu\"/></Collection></VTKFile>\n");
+             return std::vector<std::string>{"convert", (w / "s.pvd").string(), "--out", (w / "o.vdb").string()};
+         }, {"gone.vtu", "not found"}},
+        {"frames past the series", [](const fs::path& w) {
+             writeOpenFoamCase(w / "case", 4, {"0"}, {0.5});
+             return std::vector<std::string>{"convert", (w / "case").string(), "--frames", "0,3", "--out", (w / "o_####.vdb").string()};
+         }, {"--frames", "1 time steps"}},
+    };
+    return all;
+}
+
+class BadMeshTest : public InputsTest, public ::testing::WithParamInterface<std::size_t>
+{
+};
+
+} // namespace
+
+TEST_P(BadMeshTest, ExitsTwoNamesProblemWritesNothing)
+{
+    const BadMesh& c = badMeshes().at(GetParam());
+    SCOPED_TRACE(c.name);
+    const fs::path w = work();
+    const std::vector<std::string> args = c.setup(w);
+    std::set<std::string> before;
+    for (const auto& e : fs::recursive_directory_iterator(w)) before.insert(e.path().string());
+    const RunResult r = run(args);
+    EXPECT_EQ(r.code, 2) << r.describe();
+    const std::string err = lower(r.err);
+    for (const auto& word : c.words)
+        EXPECT_NE(err.find(lower(word)), std::string::npos) << "stderr lacks \"" << word << "\"\n" << r.describe();
+    EXPECT_EQ(err.find("terminate"), std::string::npos) << r.describe();
+    std::vector<std::string> created;
+    for (const auto& e : fs::recursive_directory_iterator(w))
+        if (!before.count(e.path().string())) created.push_back(e.path().string());
+    EXPECT_TRUE(created.empty()) << "created: " << (created.empty() ? "" : created.front()) << "\n" << r.describe();
+}
+
+INSTANTIATE_TEST_SUITE_P(Cases, BadMeshTest, ::testing::Range<std::size_t>(0, badMeshes().size()),
+                         [](const ::testing::TestParamInfo<std::size_t>& p) {
+                             std::string n;
+                             for (char ch : badMeshes()[p.param].name) n += std::isalnum(static_cast<unsigned char>(ch)) ? ch : '_';
+                             return std::to_string(p.param) + "_" + n;
+                         });

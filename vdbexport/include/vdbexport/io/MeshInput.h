@@ -1,0 +1,84 @@
+// CFD meshes in: VTK XML unstructured (.vtu), structured/curvilinear (.vts), multi-block (.vtm)
+// and partitioned collections (.vtpc), time series (.pvd), legacy .vtk unstructured and
+// structured grids, PLOT3D (.xyz + .q) and OpenFOAM case directories, read by VTK's own readers
+// and resampled by VTK's probe (vtkResampleToImage) onto the VDB lattice. Voxels whose centre
+// lies outside every cell stay inactive, so holes, walls and curved boundaries stay empty.
+//
+// Optional: built when VTK is found (CMake option LICVDB_VTK, Debian libvtk9-dev). Without it
+// meshInputAvailable() is false and loadMesh() throws an InputError that says what to install.
+#pragma once
+
+#include "vdbexport/io/FieldInput.h"
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace vdbexport {
+
+/// How to read and resample a mesh.
+struct MeshOptions
+{
+    std::string vectorName;          ///< velocity array; "" = U, velocity, vel, v, else the only vector
+    std::optional<double> voxelSize; ///< lattice spacing, world units; null = the median cell size
+    /// Resample inside this world box only (intersected with the mesh's bounds); null = the mesh's
+    std::optional<std::array<std::array<double, 3>, 2>> crop;
+    std::optional<double> time;      ///< time value of a series (.pvd, OpenFOAM); null = the latest
+    std::string solution;            ///< PLOT3D solution (.q) file; "" = the .xyz path with .q
+    /// Called with the fraction done (0..1) of the resampling; return false to cancel (loadMesh
+    /// then throws lic::Cancelled).
+    std::function<bool(double)> progress;
+};
+
+/// True when licvdb was built with VTK (mesh formats available).
+bool meshInputAvailable();
+
+/// The mesh formats: vtu, vts, vtm, vtpc, pvd, vtk-mesh (legacy unstructured/structured grid),
+/// plot3d, openfoam.
+bool isMeshFormat(const std::string& format);
+
+/// What a mesh file holds, without resampling it (`licvdb convert --list`).
+struct MeshSummary
+{
+    std::string format;
+    std::uint64_t cells = 0, points = 0;
+    std::size_t blocks = 0;                    ///< non-empty datasets (1 for a single mesh)
+    std::array<std::array<double, 3>, 2> bounds{};
+    double medianCellSize = 0;                 ///< the default voxel size
+    std::vector<double> times;                 ///< time values of a series; empty for one mesh
+    std::optional<double> time;                ///< the time read
+    struct Array
+    {
+        std::string name;
+        int components = 1;
+        bool cellData = false; ///< on the cells (else on the points)
+    };
+    std::vector<Array> arrays;
+};
+
+/// @brief The time values of a series: a .pvd's timesteps, an OpenFOAM case's times (sorted);
+///        empty for a single mesh.
+/// @throw lic::InputError for an unreadable file.
+std::vector<double> meshTimes(const std::string& path, const std::string& format);
+
+/// @brief Read the mesh at `path` (time options.time) and describe it.
+/// @throw lic::InputError naming the file and the problem.
+MeshSummary describeMesh(const std::string& path, const std::string& format, const MeshOptions& options);
+
+/// @brief Read the mesh at `path` and resample it onto a lattice of voxel size options.voxelSize
+///        (or the median cell size) whose voxel (0,0,0) sits at the low corner of the bounds:
+///        the velocity array becomes a Vec3SGrid, every scalar array a FloatGrid, all active on
+///        the voxels inside the mesh. Cell data are averaged to the points first (so values are
+///        interpolated within cells). The grids carry the source in metadata (`source`,
+///        `source_format`, `source_array`, `source_time` for series).
+/// @throw lic::InputError naming the file and the problem: unreadable or truncated file, no
+///        cells, degenerate bounds, no or ambiguous velocity array, an array whose tuple count
+///        is not the mesh's, NaN/Inf in the points or (nanPolicy "refuse") the velocity, a time
+///        the series lacks, a lattice over kMaxDenseVoxels voxels.
+LoadedField loadMesh(const std::string& path, const std::string& format, const MeshOptions& options,
+                     const std::string& nanPolicy = "refuse");
+
+} // namespace vdbexport
