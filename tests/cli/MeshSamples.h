@@ -6,7 +6,9 @@
 #pragma once
 
 #include <vtkCellArray.h>
+#include <vtkCell.h>
 #include <vtkCellData.h>
+#include <vtkIdList.h>
 #include <vtkDataSetTriangleFilter.h>
 #include <vtkFloatArray.h>
 #include <vtkNew.h>
@@ -16,6 +18,11 @@
 #include <vtkStructuredGrid.h>
 #include <vtkUnstructuredGrid.h>
 #include <vtkXMLStructuredGridWriter.h>
+#include <vtkMultiBlockDataSet.h>
+#include <vtkPartitionedDataSetCollection.h>
+#include <vtkUnstructuredGridWriter.h>
+#include <vtkXMLMultiBlockDataWriter.h>
+#include <vtkXMLPartitionedDataSetCollectionWriter.h>
 #include <vtkXMLUnstructuredGridWriter.h>
 
 #include <openvdb/openvdb.h>
@@ -25,6 +32,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <array>
 #include <map>
 #include <string>
 #include <vector>
@@ -72,7 +80,17 @@ inline void addFlow(vtkDataSet* ds, double omega = kOmega, const char* name = "U
 
 /// Hexahedra of a Cartesian lattice of `n` cells per axis over [-1,1]²×[0,kHeight], kept where all
 /// eight corners lie in the annulus: a stair-stepped annulus with a hole down its middle.
+inline vtkSmartPointer<vtkUnstructuredGrid> hexLattice(int n, double omega, double inner, double outer);
+
 inline vtkSmartPointer<vtkUnstructuredGrid> hexAnnulus(int n, double omega = kOmega)
+{
+    return hexLattice(n, omega, kInner, kOuter);
+}
+
+/// Every hexahedron of the lattice (a box, no hole).
+inline vtkSmartPointer<vtkUnstructuredGrid> hexBox(int n) { return hexLattice(n, kOmega, 0.0, 2.0); }
+
+inline vtkSmartPointer<vtkUnstructuredGrid> hexLattice(int n, double omega, double inner, double outer)
 {
     auto grid = vtkSmartPointer<vtkUnstructuredGrid>::New();
     vtkNew<vtkPoints> pts;
@@ -84,7 +102,7 @@ inline vtkSmartPointer<vtkUnstructuredGrid> hexAnnulus(int n, double omega = kOm
     grid->SetPoints(pts);
     auto inside = [&](int i, int j) {
         const double x = -1 + i * h, y = -1 + j * h, r = std::sqrt(x * x + y * y);
-        return r >= kInner && r <= kOuter;
+        return r >= inner && r <= outer;
     };
     for (int k = 0; k < n; ++k)
         for (int j = 0; j < n; ++j)
@@ -133,6 +151,61 @@ inline vtkSmartPointer<vtkStructuredGrid> structuredAnnulus(const OGrid& g)
     grid->SetPoints(pts);
     addFlow(grid);
     return grid;
+}
+
+/// `grid` cut in two at z = kHeight/2 by cell centre: two grids sharing all the points (each with
+/// every point and its data; cells split between them).
+inline std::array<vtkSmartPointer<vtkUnstructuredGrid>, 2> splitByZ(vtkUnstructuredGrid* grid)
+{
+    std::array<vtkSmartPointer<vtkUnstructuredGrid>, 2> halves;
+    for (int h = 0; h < 2; ++h) {
+        halves[h] = vtkSmartPointer<vtkUnstructuredGrid>::New();
+        halves[h]->SetPoints(grid->GetPoints());
+        halves[h]->GetPointData()->ShallowCopy(grid->GetPointData());
+    }
+    double b[6];
+    for (vtkIdType c = 0; c < grid->GetNumberOfCells(); ++c) {
+        grid->GetCellBounds(c, b);
+        vtkIdList* ids = grid->GetCell(c)->GetPointIds();
+        halves[0.5 * (b[4] + b[5]) < 0.5 * kHeight ? 0 : 1]->InsertNextCell(grid->GetCellType(c), ids);
+    }
+    return halves;
+}
+
+/// The halves of `grid` as a two-block .vtm (and its folder of .vtu pieces).
+inline void writeVtm(vtkUnstructuredGrid* grid, const fs::path& path)
+{
+    const auto halves = splitByZ(grid);
+    vtkNew<vtkMultiBlockDataSet> blocks;
+    blocks->SetBlock(0, halves[0]);
+    blocks->SetBlock(1, halves[1]);
+    vtkNew<vtkXMLMultiBlockDataWriter> w;
+    w->SetInputData(blocks);
+    w->SetFileName(path.c_str());
+    w->Write();
+}
+
+/// The halves of `grid` as one partitioned data set of two partitions in a .vtpc.
+inline void writeVtpc(vtkUnstructuredGrid* grid, const fs::path& path)
+{
+    const auto halves = splitByZ(grid);
+    vtkNew<vtkPartitionedDataSetCollection> coll;
+    coll->SetPartition(0, 0, halves[0]);
+    coll->SetPartition(0, 1, halves[1]);
+    vtkNew<vtkXMLPartitionedDataSetCollectionWriter> w;
+    w->SetInputData(coll);
+    w->SetFileName(path.c_str());
+    w->Write();
+}
+
+/// A legacy (binary) .vtk UNSTRUCTURED_GRID.
+inline void writeLegacyVtk(vtkUnstructuredGrid* grid, const fs::path& path)
+{
+    vtkNew<vtkUnstructuredGridWriter> w;
+    w->SetInputData(grid);
+    w->SetFileName(path.c_str());
+    w->SetFileTypeToBinary();
+    w->Write();
 }
 
 inline void writeVtu(vtkUnstructuredGrid* grid, const fs::path& path, bool ascii = false)

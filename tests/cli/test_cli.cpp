@@ -644,7 +644,7 @@ TEST_F(CliTest, InfoHelpVersion)
     };
     EXPECT_TRUE(hasHeading(none.err)) << none.describe();
     EXPECT_TRUE(hasHeading(help.out)) << help.describe();
-    for (const char* command : {"field", "bake", "info", "render"}) {
+    for (const char* command : {"field", "convert", "bake", "info", "render"}) {
         EXPECT_NE(none.err.find(command), std::string::npos) << command << "\n" << none.describe();
         EXPECT_NE(help.out.find(command), std::string::npos) << command << "\n" << help.describe();
     }

@@ -162,6 +162,30 @@ TEST_F(MeshTest, Plot3dMatchesTheFlow)
     EXPECT_TRUE(f.scalars.count("Density"));
 }
 
+TEST_F(MeshTest, MultiBlockPartitionedAndLegacyMatchTheFlow)
+{
+    const auto hex = hexAnnulus(24);
+    writeVtm(hex, work("blocks.vtm"));
+    writeVtpc(hex, work("parts.vtpc"));
+    writeLegacyVtk(hex, work("legacy.vtk"));
+    const auto one = load(work("blocks.vtm"), 0.04);
+    EXPECT_EQ(one.format, "vtm");
+    expectAccurate(one, 0.16, "two-block .vtm");
+    const auto parts = load(work("parts.vtpc"), 0.04);
+    EXPECT_EQ(parts.format, "vtpc");
+    expectAccurate(parts, 0.16, "two-partition .vtpc");
+    const auto legacy = load(work("legacy.vtk"), 0.04);
+    EXPECT_EQ(legacy.format, "vtk-mesh");
+    expectAccurate(legacy, 0.16, "legacy .vtk");
+    // The halves meet without a seam: the same active voxels as the whole mesh.
+    const auto whole = [&] {
+        writeVtu(hex, work("whole.vtu"));
+        return load(work("whole.vtu"), 0.04);
+    }();
+    EXPECT_EQ(one.velocity->activeVoxelCount(), whole.velocity->activeVoxelCount());
+    EXPECT_EQ(parts.velocity->activeVoxelCount(), whole.velocity->activeVoxelCount());
+}
+
 TEST_F(MeshTest, OpenFoamCaseMatchesTheFlow)
 {
     // A box: every voxel of it is interior; the annulus' exterior checks do not apply.

@@ -563,6 +563,18 @@ TEST(RecipeField, DefaultsResolvedAndRoundTrip)
     EXPECT_EQ(r.field.dtype, ">f8");
     EXPECT_EQ(Recipe::fromJson(r.toJson()), r);
     EXPECT_EQ(r.toJson()["field"]["crop"], json::parse("[[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]]"));
+
+    // Meshes (issue [cfd]): the formats, a series' time and PLOT3D's solution file.
+    EXPECT_TRUE(j["time"].is_null());
+    EXPECT_EQ(j["solution"], "");
+    for (const char* format : {"vtu", "vts", "vtm", "vtpc", "pvd", "vtk-mesh", "plot3d", "openfoam"}) {
+        const Recipe m = vdbexport::parseRecipe(json{{"field", {{"format", format}, {"time", 0.5}, {"solution", "a.q"}}}}.dump());
+        EXPECT_EQ(m.field.format, format);
+        ASSERT_TRUE(m.field.time);
+        EXPECT_EQ(*m.field.time, 0.5);
+        EXPECT_EQ(m.field.solution, "a.q");
+        EXPECT_EQ(Recipe::fromJson(m.toJson()), m);
+    }
 }
 
 TEST(RecipeField, ErrorsNameTheKey)
@@ -580,7 +592,8 @@ TEST(RecipeField, ErrorsNameTheKey)
     EXPECT_NE(invalid(R"({"field": {"shape": [4, 2.5, 4]}})").find("field.shape[1]"), std::string::npos);
     EXPECT_NE(invalid(R"({"field": {"crop": [[0, 0, 5], [1, 1, 1]]}})").find("on axis z"), std::string::npos);
     EXPECT_NE(invalid(R"({"field": {"nan_policy": "zeros"}})").find("did you mean \"zero\""), std::string::npos);
-    EXPECT_NE(invalid(R"({"field": {"format": "vtu"}})").find("field.format"), std::string::npos);
+    EXPECT_NE(invalid(R"({"field": {"format": "stl"}})").find("field.format"), std::string::npos);
+    EXPECT_NE(parseError(R"({"field": {"time": "latest"}})").find("field.time"), std::string::npos);
     EXPECT_NE(invalid(R"({"field": {"dtype": "float16"}})").find("field.dtype"), std::string::npos);
 }
 

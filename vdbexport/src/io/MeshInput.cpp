@@ -342,9 +342,9 @@ vtkSmartPointer<vtkDataObject> readSingle(const std::string& path, const std::st
         for (const auto& e : entries) {
             if (e.time != t) continue;
             std::optional<double> ignored;
-            const std::string partFormat = formatFromPath(e.file);
-            const std::string meshFormat = partFormat == "vtk" ? "vtk-mesh" : partFormat;
-            if (!isMeshFormat(meshFormat) || meshFormat == "pvd")
+            const std::string ext = lower(fs::path(e.file).extension().string());
+            const std::string meshFormat = ext == ".vtk" ? "vtk-mesh" : ext.empty() ? "" : ext.substr(1);
+            if (!isMeshFormat(meshFormat) || meshFormat == "pvd" || meshFormat == "plot3d" || meshFormat == "openfoam")
                 detail::inputError(path, "lists " + q(e.file) + ", which is not a mesh file (.vtu, .vts, .vtm, .vtk)");
             blocks->SetBlock(n++, readSingle(e.file, meshFormat, options, ignored));
         }
@@ -683,11 +683,12 @@ LoadedField loadMesh(const std::string& path, const std::string& format, const M
         voxels *= n;
         dims[a] = n < 2e9 ? int(n) : 0;
     }
-    if (voxels > double(kMaxDenseVoxels) || dims[0] == 0 || dims[1] == 0 || dims[2] == 0) {
-        const double hMin = h * std::cbrt(voxels / double(kMaxDenseVoxels)) * 1.01;
+    const double maxVoxels = double(std::min<std::uint64_t>(options.maxVoxels, kMaxDenseVoxels));
+    if (voxels > maxVoxels || dims[0] == 0 || dims[1] == 0 || dims[2] == 0) {
+        const double hMin = h * std::cbrt(voxels / maxVoxels) * 1.01;
         detail::inputError(path, "resampling at voxel size " + num(h) + " makes "
                                  + num(voxels) + " voxels, more than the limit of "
-                                 + std::to_string(kMaxDenseVoxels) + "; pass --voxel-size " + num(hMin)
+                                 + num(maxVoxels) + "; pass --voxel-size " + num(hMin)
                                  + " or larger, or --crop a smaller box");
     }
 

@@ -28,6 +28,8 @@ struct MeshOptions
     std::optional<std::array<std::array<double, 3>, 2>> crop;
     std::optional<double> time;      ///< time value of a series (.pvd, OpenFOAM); null = the latest
     std::string solution;            ///< PLOT3D solution (.q) file; "" = the .xyz path with .q
+    /// Largest lattice to make (voxels), at most kMaxDenseVoxels
+    std::uint64_t maxVoxels = kMaxDenseVoxels;
     /// Called with the fraction done (0..1) of the resampling; return false to cancel (loadMesh
     /// then throws lic::Cancelled).
     std::function<bool(double)> progress;
