@@ -463,6 +463,16 @@ const std::vector<BadMesh>& badMeshes()
                                      "<DataSet timestep=\"0\" file=\"gone.vtu\"/></Collection></VTKFile>\n");
              return std::vector<std::string>{"convert", (w / "s.pvd").string(), "--out", (w / "o.vdb").string()};
          }, {"gone.vtu", "not found"}},
+        {"a file that crashes VTK's reader", [](const fs::path& w) {
+             // fuzz_vtu's first finding: a bad ASCII number in a cell array makes VTK 9.1's XML
+             // reader dereference null. licvdb reads meshes in a child process first.
+             std::ifstream in(fs::path(LICVDB_SOURCE_DIR) / "tests/fuzz/corpus/vtu/cells.vtu");
+             std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+             const auto at = s.find("\n0.0 0.5 0.2\n");
+             if (at != std::string::npos) s.replace(at, 13, "\n0.0 0.= 0.2\n");
+             writeBytes(w / "crash.vtu", s);
+             return std::vector<std::string>{"bake", "--field", (w / "crash.vtu").string(), "--out", (w / "o.vdb").string()};
+         }, {"crash.vtu", "crashed VTK's reader"}},
         {"frames past the series", [](const fs::path& w) {
              writeOpenFoamCase(w / "case", 4, {"0"}, {0.5});
              return std::vector<std::string>{"convert", (w / "case").string(), "--frames", "0,3", "--out", (w / "o_####.vdb").string()};

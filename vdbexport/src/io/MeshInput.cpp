@@ -3,6 +3,7 @@
 #include "vdbexport/io/MeshInput.h"
 
 #include "io/DenseCommon.h"
+#include "vdbexport/io/VdbCheck.h"
 
 #include <lic/util/Error.h>
 
@@ -51,6 +52,15 @@ namespace vdbexport {
 using detail::q;
 
 namespace {
+
+/// A number exactly (17 significant digits), for a child's command line.
+std::string num17(double v)
+{
+    std::ostringstream o;
+    o.precision(17);
+    o << v;
+    return o.str();
+}
 
 /// A number as a user writes it: up to 6 significant digits, no trailing zeros.
 std::string num(double v)
@@ -522,9 +532,24 @@ struct Mesh
     std::vector<double> times;
 };
 
+/// VTK's readers are not hardened against malformed files (VTK 9.1's XML reader dereferences null
+/// on a bad ASCII number: found by fuzz_vtu): `licvdb` first reads the mesh in a child process
+/// (`licvdb convert PATH --list`, as .vdb files are read, see VdbCheck.h), so a file that crashes
+/// or hangs VTK is refused without taking the program down. Nothing happens in library use or in
+/// the child itself (no executable set).
+void readInChildFirst(const std::string& path, const std::string& format, const MeshOptions& options)
+{
+    if (readIsolationExecutable().empty()) return;
+    std::vector<std::string> args{"convert", "--list", "--quiet", "--format", format};
+    if (options.time) args.insert(args.end(), {"--time", num17(*options.time)});
+    if (!options.solution.empty()) args.insert(args.end(), {"--solution", options.solution});
+    args.insert(args.end(), {"--", path});
+    checkReadInIsolatedProcess(path, args, "VTK's reader", describeFormat(format));
+}
+
 Mesh readMesh(const std::string& path, const std::string& format, const MeshOptions& options)
 {
-    if (!meshInputAvailable()) throw lic::InputError("unreachable");
+    readInChildFirst(path, format, options);
     Mesh m;
     m.times = meshTimes(path, format);
     m.data = readSingle(path, format, options, m.time);

@@ -70,6 +70,13 @@ double readTimeoutSeconds(uint64_t fileBytes)
 
 void checkInIsolatedProcess(const std::string& path)
 {
+    checkReadInIsolatedProcess(path, {"info", "--check", "--quiet", "--", path}, "OpenVDB's reader",
+                               "an intact OpenVDB .vdb file");
+}
+
+void checkReadInIsolatedProcess(const std::string& path, const std::vector<std::string>& args, const std::string& reader,
+                                const std::string& expected)
+{
     const std::string exe = readIsolationExecutable();
     if (exe.empty()) return;
     struct stat st{};
@@ -92,10 +99,13 @@ void checkInIsolatedProcess(const std::string& path)
     std::vector<char*> envp;
     for (auto& e : env) envp.push_back(e.data());
     envp.push_back(nullptr);
-    std::string a0 = exe, a1 = "info", a2 = "--check", a3 = "--quiet", a4 = "--", a5 = path;
-    char* argv[] = {a0.data(), a1.data(), a2.data(), a3.data(), a4.data(), a5.data(), nullptr};
+    std::vector<std::string> words{exe};
+    words.insert(words.end(), args.begin(), args.end());
+    std::vector<char*> argv;
+    for (auto& w : words) argv.push_back(w.data());
+    argv.push_back(nullptr);
     pid_t pid = -1;
-    const int rc = posix_spawn(&pid, exe.c_str(), &actions, nullptr, argv, envp.data());
+    const int rc = posix_spawn(&pid, exe.c_str(), &actions, nullptr, argv.data(), envp.data());
     posix_spawn_file_actions_destroy(&actions);
     ::close(errPipe[1]);
     if (rc != 0) {
@@ -131,8 +141,8 @@ void checkInIsolatedProcess(const std::string& path)
         ::kill(pid, SIGKILL);
         while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
         throw lic::InputError("reading " + quote(path) + " did not finish within " + std::to_string(int(limit))
-                              + " s (in a child process, which was stopped); refused as corrupt; expected an intact "
-                                "OpenVDB .vdb file (set LICVDB_READ_TIMEOUT=SECONDS for a very large file on a slow disk)");
+                              + " s (in a child process, which was stopped); refused as corrupt; expected " + expected
+                              + " (set LICVDB_READ_TIMEOUT=SECONDS for a very large file on a slow disk)");
     }
     // stderr is closed; give the child the rest of the time to exit.
     for (;;) {
@@ -150,9 +160,8 @@ void checkInIsolatedProcess(const std::string& path)
     }
     if (WIFSIGNALED(status)) {
         const int sig = WTERMSIG(status);
-        throw lic::InputError("reading " + quote(path) + " crashed OpenVDB's reader in a child process (signal "
-                              + std::to_string(sig) + ": " + strsignal(sig)
-                              + "); the file is corrupt; expected an intact OpenVDB .vdb file");
+        throw lic::InputError("reading " + quote(path) + " crashed " + reader + " in a child process (signal "
+                              + std::to_string(sig) + ": " + strsignal(sig) + "); the file is corrupt; expected " + expected);
     }
     const int code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
     if (code == 0) return;

@@ -87,6 +87,13 @@ uint64_t readMemoryLimitBytes();
 ///        be started or fails for another reason.
 void checkInIsolatedProcess(const std::string& path);
 
+/// @brief The same for any reader: run the set executable with `args` (e.g. `convert PATH --list`
+///        for a mesh, read by VTK) in a child process with LICVDB_READ_CHILD=1. `reader` names the
+///        reader in the crash message ("VTK's reader"), `expected` what an intact file is.
+/// @throw as checkInIsolatedProcess.
+void checkReadInIsolatedProcess(const std::string& path, const std::vector<std::string>& args, const std::string& reader,
+                                const std::string& expected);
+
 /// @brief Set the executable that checkInIsolatedProcess runs (`licvdb`); empty turns layer 2 off.
 /// `licvdb` sets itself at start-up, except in the child (environment LICVDB_READ_CHILD=1).
 void setReadIsolation(const std::string& executable);
