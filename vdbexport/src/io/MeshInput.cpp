@@ -676,55 +676,57 @@ void onProgress(vtkObject* caller, unsigned long, void* client, void* data)
 
 } // namespace
 
-LoadedField loadMesh(const std::string& path, const std::string& format, const MeshOptions& options,
-                     const std::string& nanPolicy)
-{
-    openvdb::initialize();
-    Mesh m = readMesh(path, format, options);
-    const std::string velocityName = chooseVelocity(m.leaves, options.vectorName, path);
-    LoadedField out;
-    out.format = format;
-    out.nonFiniteReplaced = checkVelocityValues(m.leaves, velocityName, nanPolicy, path);
+namespace {
 
-    // The lattice: voxel (0,0,0) at the low corner of the (cropped) bounds.
-    auto box = boundsOf(m.leaves);
-    std::uint64_t cells = 0;
-    for (const auto& ds : m.leaves) cells += std::uint64_t(ds->GetNumberOfCells());
+/// The lattice the mesh is resampled onto: voxel (0,0,0) at the low corner of the (cropped)
+/// bounds, `h` apart.
+struct Lattice
+{
+    std::array<std::array<double, 3>, 2> box;
+    double h = 0;
+    std::array<int, 3> dims{};
+};
+
+Lattice chooseLattice(const Mesh& m, const MeshOptions& options, const std::string& path)
+{
+    Lattice l;
+    l.box = boundsOf(m.leaves);
     if (options.crop) {
         for (int a = 0; a < 3; ++a) {
-            box[0][a] = std::max(box[0][a], (*options.crop)[0][a]);
-            box[1][a] = std::min(box[1][a], (*options.crop)[1][a]);
-            if (!(box[1][a] > box[0][a]))
+            l.box[0][a] = std::max(l.box[0][a], (*options.crop)[0][a]);
+            l.box[1][a] = std::min(l.box[1][a], (*options.crop)[1][a]);
+            if (!(l.box[1][a] > l.box[0][a]))
                 detail::inputError(path, std::string("the crop box misses the mesh along ") + "xyz"[a]);
         }
     }
-    const double median = medianCellSize(m.leaves);
-    const double h = options.voxelSize ? *options.voxelSize : median;
-    if (!(h > 0) || !std::isfinite(h)) detail::inputError(path, "has degenerate cells (zero size): pass --voxel-size");
-    std::array<int, 3> dims{};
+    l.h = options.voxelSize ? *options.voxelSize : medianCellSize(m.leaves);
+    if (!(l.h > 0) || !std::isfinite(l.h)) detail::inputError(path, "has degenerate cells (zero size): pass --voxel-size");
     double voxels = 1;
     for (int a = 0; a < 3; ++a) {
-        const double n = std::floor((box[1][a] - box[0][a]) / h + 1e-9) + 1;
+        const double n = std::floor((l.box[1][a] - l.box[0][a]) / l.h + 1e-9) + 1;
         voxels *= n;
-        dims[a] = n < 2e9 ? int(n) : 0;
+        l.dims[a] = n < 2e9 ? int(n) : 0;
     }
     const double maxVoxels = double(std::min<std::uint64_t>(options.maxVoxels, kMaxDenseVoxels));
-    if (voxels > maxVoxels || dims[0] == 0 || dims[1] == 0 || dims[2] == 0) {
-        const double hMin = h * std::cbrt(voxels / maxVoxels) * 1.01;
-        detail::inputError(path, "resampling at voxel size " + num(h) + " makes "
-                                 + num(voxels) + " voxels, more than the limit of "
-                                 + num(maxVoxels) + "; pass --voxel-size " + num(hMin)
-                                 + " or larger, or --crop a smaller box");
+    if (voxels > maxVoxels || l.dims[0] == 0 || l.dims[1] == 0 || l.dims[2] == 0) {
+        const double hMin = l.h * std::cbrt(voxels / maxVoxels) * 1.01;
+        detail::inputError(path, "resampling at voxel size " + num(l.h) + " makes " + num(voxels)
+                                 + " voxels, more than the limit of " + num(maxVoxels) + "; pass --voxel-size "
+                                 + num(hMin) + " or larger, or --crop a smaller box");
     }
+    return l;
+}
 
-    bool averaged = false;
-    vtkSmartPointer<vtkDataObject> input = withPointData(m, averaged);
+/// VTK's probe of `input` at every lattice point (vtkResampleToImage), with progress.
+vtkSmartPointer<vtkImageData> probe(vtkDataObject* input, const Lattice& l, const MeshOptions& options,
+                                    const std::string& path, const std::string& format, std::string& maskName)
+{
     vtkNew<vtkResampleToImage> resample;
     resample->SetInputDataObject(input);
     resample->UseInputBoundsOff();
-    resample->SetSamplingBounds(box[0][0], box[0][0] + (dims[0] - 1) * h, box[0][1], box[0][1] + (dims[1] - 1) * h,
-                                box[0][2], box[0][2] + (dims[2] - 1) * h);
-    resample->SetSamplingDimensions(dims[0], dims[1], dims[2]);
+    resample->SetSamplingBounds(l.box[0][0], l.box[0][0] + (l.dims[0] - 1) * l.h, l.box[0][1],
+                                l.box[0][1] + (l.dims[1] - 1) * l.h, l.box[0][2], l.box[0][2] + (l.dims[2] - 1) * l.h);
+    resample->SetSamplingDimensions(l.dims[0], l.dims[1], l.dims[2]);
     ProgressClient client{&options.progress};
     vtkNew<vtkCallbackCommand> progress;
     progress->SetCallback(onProgress);
@@ -732,15 +734,22 @@ LoadedField loadMesh(const std::string& path, const std::string& format, const M
     resample->AddObserver(vtkCommand::ProgressEvent, progress);
     runChecked(resample, path, describeFormat(format), [&] { resample->Update(); });
     if (client.cancelled) throw lic::Cancelled();
-    vtkImageData* image = resample->GetOutput();
-    vtkDataArray* mask = image->GetPointData()->GetArray(resample->GetMaskArrayName());
+    maskName = resample->GetMaskArrayName();
+    vtkSmartPointer<vtkImageData> image = resample->GetOutput();
+    return image;
+}
+
+/// The probed values inside the mesh as grids: the velocity and one float grid per scalar array.
+/// @return the number of active voxels.
+std::uint64_t gridsFromImage(vtkImageData* image, const std::string& maskName, const Lattice& l,
+                             const std::string& velocityName, const std::string& path, LoadedField& out)
+{
+    vtkDataArray* mask = image->GetPointData()->GetArray(maskName.c_str());
     vtkDataArray* vel = image->GetPointData()->GetArray(velocityName.c_str());
     if (!mask || !vel) detail::inputError(path, "VTK's resampling lost the array " + q(velocityName));
-
-    // The grids: every voxel whose centre lies in a cell of the mesh.
     openvdb::Mat4d mat = openvdb::Mat4d::identity();
-    mat.setToScale(openvdb::Vec3d(h));
-    mat.setTranslation(openvdb::Vec3d(box[0][0], box[0][1], box[0][2]));
+    mat.setToScale(openvdb::Vec3d(l.h));
+    mat.setTranslation(openvdb::Vec3d(l.box[0][0], l.box[0][1], l.box[0][2]));
     const auto xform = openvdb::math::Transform::createLinearTransform(mat);
     out.velocity = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
     out.velocity->setTransform(xform->copy());
@@ -757,10 +766,10 @@ LoadedField loadMesh(const std::string& path, const std::string& format, const M
     std::vector<openvdb::FloatGrid::Accessor> saccs;
     for (auto& [arr, g] : scalars) saccs.push_back(g->getAccessor());
     std::uint64_t active = 0;
-    const vtkIdType nx = dims[0], ny = dims[1];
-    for (int k = 0; k < dims[2]; ++k)
-        for (int j = 0; j < dims[1]; ++j)
-            for (int i = 0; i < dims[0]; ++i) {
+    const vtkIdType nx = l.dims[0], ny = l.dims[1];
+    for (int k = 0; k < l.dims[2]; ++k)
+        for (int j = 0; j < l.dims[1]; ++j)
+            for (int i = 0; i < l.dims[0]; ++i) {
                 const vtkIdType id = i + nx * (j + ny * vtkIdType(k));
                 if (mask->GetComponent(id, 0) == 0) continue;
                 const openvdb::Coord ijk(i, j, k);
@@ -770,8 +779,32 @@ LoadedField loadMesh(const std::string& path, const std::string& format, const M
                     saccs[s].setValueOn(ijk, float(scalars[s].first->GetComponent(id, 0)));
                 ++active;
             }
+    for (auto& [arr, g] : scalars) {
+        g->pruneGrid();
+        out.scalars.emplace(arr->GetName(), g);
+    }
+    return active;
+}
+
+} // namespace
+
+LoadedField loadMesh(const std::string& path, const std::string& format, const MeshOptions& options,
+                     const std::string& nanPolicy)
+{
+    openvdb::initialize();
+    Mesh m = readMesh(path, format, options);
+    const std::string velocityName = chooseVelocity(m.leaves, options.vectorName, path);
+    LoadedField out;
+    out.format = format;
+    out.nonFiniteReplaced = checkVelocityValues(m.leaves, velocityName, nanPolicy, path);
+    const Lattice l = chooseLattice(m, options, path);
+    bool averaged = false;
+    const vtkSmartPointer<vtkDataObject> input = withPointData(m, averaged);
+    std::string maskName;
+    const vtkSmartPointer<vtkImageData> image = probe(input, l, options, path, format, maskName);
+    const std::uint64_t active = gridsFromImage(image, maskName, l, velocityName, path, out);
     if (active == 0)
-        detail::inputError(path, "no voxel centre at voxel size " + num(h)
+        detail::inputError(path, "no voxel centre at voxel size " + num(l.h)
                                  + " lies inside a volume cell of the mesh (a surface mesh, or cells smaller than a voxel "
                                    "and between voxel centres: pass a smaller --voxel-size)");
 
@@ -786,18 +819,15 @@ LoadedField loadMesh(const std::string& path, const std::string& format, const M
         if (m.time) g.insertMeta("source_time", openvdb::DoubleMetadata(*m.time));
     };
     tag(*out.velocity, velocityName);
-    for (auto& [arr, g] : scalars) {
-        tag(*g, arr->GetName());
-        g->pruneGrid();
-        out.scalars.emplace(arr->GetName(), g);
-    }
+    for (auto& [name, g] : out.scalars) tag(*g, name);
 
+    std::uint64_t cells = 0;
+    for (const auto& ds : m.leaves) cells += std::uint64_t(ds->GetNumberOfCells());
     std::ostringstream note;
     note << "resampled " << cells << " cells" << (m.leaves.size() > 1 ? " in " + std::to_string(m.leaves.size()) + " blocks" : "")
-         << (m.time ? " at time " + num(*m.time) : "") << " onto " << dims[0] << "x" << dims[1] << "x"
-         << dims[2] << " voxels of size " << num(h)
-         << (options.voxelSize ? "" : " (the median cell size; --voxel-size to change)") << ": " << active
-         << " inside the mesh";
+         << (m.time ? " at time " + num(*m.time) : "") << " onto " << l.dims[0] << "x" << l.dims[1] << "x" << l.dims[2]
+         << " voxels of size " << num(l.h) << (options.voxelSize ? "" : " (the median cell size; --voxel-size to change)")
+         << ": " << active << " inside the mesh";
     out.notes.push_back(note.str());
     if (averaged) out.notes.push_back("cell data were averaged to the mesh points, then interpolated within cells");
     if (out.nonFiniteReplaced)
