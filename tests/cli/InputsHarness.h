@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -103,6 +104,26 @@ protected:
     RunResult runCommand(const std::string& command) { return cli_test::runShell(work(), mRoot / "logs", command); }
 
     RunResult run(const std::vector<std::string>& args) { return runCommand(cli_test::licvdbCommand(args)); }
+
+    /// Run licvdb with `args` in the work directory and expect a refusal: exit 2, each of `words`
+    /// in stderr (case-insensitive), no crash, and no file or directory created.
+    RunResult expectRefusedWritingNothing(const std::vector<std::string>& args, const std::vector<std::string>& words)
+    {
+        const fs::path w = work();
+        std::set<std::string> before;
+        for (const auto& e : fs::recursive_directory_iterator(w)) before.insert(e.path().string());
+        const RunResult r = run(args);
+        EXPECT_EQ(r.code, 2) << r.describe();
+        const std::string err = lower(r.err);
+        for (const auto& word : words)
+            EXPECT_NE(err.find(lower(word)), std::string::npos) << "stderr lacks \"" << word << "\"\n" << r.describe();
+        EXPECT_EQ(err.find("terminate"), std::string::npos) << r.describe();
+        std::vector<std::string> created;
+        for (const auto& e : fs::recursive_directory_iterator(w))
+            if (!before.count(e.path().string())) created.push_back(e.path().string());
+        EXPECT_TRUE(created.empty()) << "created: " << (created.empty() ? "" : created.front()) << "\n" << r.describe();
+        return r;
+    }
 
 public:
     /// Bake arguments with small, fast defaults (--length 4 --step 0.5 --upsample 1); `extra` is appended.
