@@ -48,8 +48,8 @@ Accuracy accuracy(const openvdb::Vec3SGrid& g, double margin, double omega = kOm
     }
     a.relError = norm > 0 ? err / norm : 1;
     // Every voxel centre of the lattice around the mesh.
-    const openvdb::CoordBBox box = g.evalActiveVoxelBoundingBox().expandBy(3), unused = box;
-    (void)unused;
+    openvdb::CoordBBox box = g.evalActiveVoxelBoundingBox();
+    box.expand(3);
     std::uint64_t interior = 0, covered = 0;
     auto acc = g.getConstAccessor();
     for (auto c = box.begin(); c; ++c) {

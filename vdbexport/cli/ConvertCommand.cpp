@@ -158,6 +158,7 @@ int ConvertCommand::run(Context&)
     if (mOut.empty()) throw lic::InputError("--out is required (or --list to describe the input)");
     const std::vector<double> times = chooseTimes(format);
     const bool series = !times.empty() && isFramePattern(mOut);
+    const std::vector<double> all = series ? meshTimes(mInput, format) : std::vector<double>{};
 
     json summary{{"input", mInput}, {"files", json::array()}, {"notes", json::array()}};
     summary = runWithProgress(mCommon.quiet, mCommon.progressStyle(), [&](lic::Progress& progress) {
@@ -175,11 +176,7 @@ int ConvertCommand::run(Context&)
             for (const auto& [name, g] : f.scalars)
                 if (name != "velocity") grids.push_back(g);
             // The step's index among the series' times names the file.
-            std::size_t index = k;
-            if (series) {
-                const auto all = meshTimes(mInput, format);
-                index = std::size_t(std::find(all.begin(), all.end(), times[k]) - all.begin());
-            }
+            const std::size_t index = series ? std::size_t(std::find(all.begin(), all.end(), times[k]) - all.begin()) : k;
             const std::string path = series ? expandFramePattern(mOut, int(index)) : mOut;
             outputs.addVdb(path, grids);
             json file{{"path", path}, {"grids", json::array()}, {"active_voxels", f.velocity->activeVoxelCount()},

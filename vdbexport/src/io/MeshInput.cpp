@@ -274,7 +274,7 @@ double chooseTime(const std::vector<double>& times, const std::optional<double>&
 }
 
 vtkSmartPointer<vtkDataObject> readSingle(const std::string& path, const std::string& format, const MeshOptions& options,
-                                          std::optional<double>& timeRead);
+                                          std::optional<double>& timeRead, std::vector<double>& times);
 
 template<typename ReaderT>
 vtkSmartPointer<vtkDataObject> readFile(const std::string& path, const std::string& format)
@@ -320,8 +320,10 @@ vtkSmartPointer<vtkDataObject> readPlot3d(const std::string& path, const MeshOpt
     return r->GetOutputDataObject(0);
 }
 
+/// What the reader of `format` gives for `path`: the time read and the series' times (sorted) are
+/// set for a series (pvd, openfoam), left empty otherwise.
 vtkSmartPointer<vtkDataObject> readSingle(const std::string& path, const std::string& format, const MeshOptions& options,
-                                          std::optional<double>& timeRead)
+                                          std::optional<double>& timeRead, std::vector<double>& times)
 {
     if (format == "vtu") return readFile<vtkXMLUnstructuredGridReader>(path, format);
     if (format == "vts") return readFile<vtkXMLStructuredGridReader>(path, format);
@@ -332,7 +334,6 @@ vtkSmartPointer<vtkDataObject> readSingle(const std::string& path, const std::st
     if (format == "openfoam") {
         auto r = openFoamReader(path);
         vtkDoubleArray* tv = r->GetTimeValues();
-        std::vector<double> times;
         for (vtkIdType i = 0; tv && i < tv->GetNumberOfTuples(); ++i) times.push_back(tv->GetValue(i));
         times = sortedUnique(times);
         if (times.empty()) detail::inputError(path, "is an OpenFOAM case without time directories (no 0/ or later)");
@@ -343,20 +344,21 @@ vtkSmartPointer<vtkDataObject> readSingle(const std::string& path, const std::st
     }
     if (format == "pvd") {
         const auto entries = parsePvd(path);
-        std::vector<double> times;
         for (const auto& e : entries) times.push_back(e.time);
-        const double t = chooseTime(sortedUnique(times), options.time, path);
+        times = sortedUnique(times);
+        const double t = chooseTime(times, options.time, path);
         timeRead = t;
         auto blocks = vtkSmartPointer<vtkMultiBlockDataSet>::New();
         unsigned n = 0;
         for (const auto& e : entries) {
             if (e.time != t) continue;
             std::optional<double> ignored;
+            std::vector<double> none;
             const std::string ext = lower(fs::path(e.file).extension().string());
             const std::string meshFormat = ext == ".vtk" ? "vtk-mesh" : ext.empty() ? "" : ext.substr(1);
             if (!isMeshFormat(meshFormat) || meshFormat == "pvd" || meshFormat == "plot3d" || meshFormat == "openfoam")
                 detail::inputError(path, "lists " + q(e.file) + ", which is not a mesh file (.vtu, .vts, .vtm, .vtk)");
-            blocks->SetBlock(n++, readSingle(e.file, meshFormat, options, ignored));
+            blocks->SetBlock(n++, readSingle(e.file, meshFormat, options, ignored, none));
         }
         return blocks;
     }
@@ -551,8 +553,7 @@ Mesh readMesh(const std::string& path, const std::string& format, const MeshOpti
 {
     readInChildFirst(path, format, options);
     Mesh m;
-    m.times = meshTimes(path, format);
-    m.data = readSingle(path, format, options, m.time);
+    m.data = readSingle(path, format, options, m.time, m.times);
     if (!m.data) detail::inputError(path, "VTK read nothing");
     m.leaves = leavesOf(m.data);
     if (m.leaves.empty())
@@ -572,11 +573,6 @@ Mesh readMesh(const std::string& path, const std::string& format, const MeshOpti
 
 bool meshInputAvailable() { return true; }
 
-bool isMeshFormat(const std::string& format)
-{
-    static const std::set<std::string> formats{"vtu", "vts", "vtm", "vtpc", "pvd", "vtk-mesh", "plot3d", "openfoam"};
-    return formats.count(format) > 0;
-}
 
 std::vector<double> meshTimes(const std::string& path, const std::string& format)
 {

@@ -20,11 +20,6 @@ namespace {
 
 bool meshInputAvailable() { return false; }
 
-bool isMeshFormat(const std::string& format)
-{
-    static const std::set<std::string> formats{"vtu", "vts", "vtm", "vtpc", "pvd", "vtk-mesh", "plot3d", "openfoam"};
-    return formats.count(format) > 0;
-}
 
 std::vector<double> meshTimes(const std::string& path, const std::string&) { missing(path); }
 

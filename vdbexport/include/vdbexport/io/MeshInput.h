@@ -40,7 +40,12 @@ bool meshInputAvailable();
 
 /// The mesh formats: vtu, vts, vtm, vtpc, pvd, vtk-mesh (legacy unstructured/structured grid),
 /// plot3d, openfoam.
-bool isMeshFormat(const std::string& format);
+inline bool isMeshFormat(const std::string& format)
+{
+    for (const char* f : {"vtu", "vts", "vtm", "vtpc", "pvd", "vtk-mesh", "plot3d", "openfoam"})
+        if (format == f) return true;
+    return false;
+}
 
 /// What a mesh file holds, without resampling it (`licvdb convert --list`).
 struct MeshSummary
