@@ -15,6 +15,7 @@
 
 #include <openvdb/tools/GridOperators.h>
 #include <tbb/global_control.h>
+#include <vtkUnsignedCharArray.h>
 
 #include <set>
 
@@ -473,6 +474,33 @@ const std::vector<BadMesh>& badMeshes()
              writeBytes(w / "crash.vtu", s);
              return std::vector<std::string>{"bake", "--field", (w / "crash.vtu").string(), "--out", (w / "o.vdb").string()};
          }, {"crash.vtu", "crashed VTK's reader"}},
+        {"cell refers to a missing point", [](const fs::path& w) {
+             // VTK's XML reader accepts a connectivity index past the points; its filters then
+             // read out of bounds (fuzz_vtu's second finding, in vtkCellDataToPointData).
+             auto g = hexAnnulus(6);
+             g->GetCells()->GetConnectivityArray()->SetComponent(5, 0, 99999);
+             writeVtu(g, w / "farpoint.vtu", true);
+             return std::vector<std::string>{"convert", (w / "farpoint.vtu").string(), "--out", (w / "o.vdb").string()};
+         }, {"farpoint.vtu", "cell 0 refers to point 99999", "points"}},
+        {"hexahedron of three points", [](const fs::path& w) {
+             auto g = hexAnnulus(6);
+             vtkNew<vtkCellArray> cells;
+             vtkNew<vtkIdList> ids;
+             for (vtkIdType c = 0; c < g->GetNumberOfCells(); ++c) {
+                 g->GetCellPoints(c, ids);
+                 if (c == 4) ids->SetNumberOfIds(3);
+                 cells->InsertNextCell(ids);
+             }
+             g->SetCells(VTK_HEXAHEDRON, cells);
+             writeVtu(g, w / "short.vtu");
+             return std::vector<std::string>{"convert", (w / "short.vtu").string(), "--out", (w / "o.vdb").string()};
+         }, {"short.vtu", "cell 4", "vtkHexahedron", "has 3 points; the type needs 8"}},
+        {"unknown cell type", [](const fs::path& w) {
+             auto g = hexAnnulus(6);
+             g->GetCellTypesArray()->SetValue(2, 200);
+             writeVtu(g, w / "type.vtu", true);
+             return std::vector<std::string>{"bake", "--field", (w / "type.vtu").string(), "--out", (w / "o.vdb").string()};
+         }, {"type.vtu", "cell 2", "type 200", "does not read"}},
         {"frames past the series", [](const fs::path& w) {
              writeOpenFoamCase(w / "case", 4, {"0"}, {0.5});
              return std::vector<std::string>{"convert", (w / "case").string(), "--frames", "0,3", "--out", (w / "o_####.vdb").string()};

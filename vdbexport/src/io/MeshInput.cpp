@@ -9,13 +9,18 @@
 
 #include <vtkCallbackCommand.h>
 #include <vtkCellData.h>
+#include <vtkCellArray.h>
 #include <vtkCellDataToPointData.h>
+#include <vtkCellType.h>
+#include <vtkCellTypes.h>
 #include <vtkCommand.h>
 #include <vtkCompositeDataIterator.h>
 #include <vtkCompositeDataSet.h>
 #include <vtkDataArray.h>
 #include <vtkDataSet.h>
 #include <vtkDoubleArray.h>
+#include <vtkIdList.h>
+#include <vtkIdTypeArray.h>
 #include <vtkGenericDataObjectReader.h>
 #include <vtkImageData.h>
 #include <vtkLogger.h>
@@ -29,6 +34,9 @@
 #include <vtkPoints.h>
 #include <vtkResampleToImage.h>
 #include <vtkSmartPointer.h>
+#include <vtkStructuredGrid.h>
+#include <vtkUnsignedCharArray.h>
+#include <vtkUnstructuredGrid.h>
 #include <vtkXMLDataElement.h>
 #include <vtkXMLDataParser.h>
 #include <vtkXMLMultiBlockDataReader.h>
@@ -42,6 +50,7 @@
 #include <fstream>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -416,6 +425,135 @@ void checkPoints(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves, const s
         }
 }
 
+/// Points a cell of VTK type `type` must have: the count for fixed-size types, kVariable for the
+/// variable-size types licvdb accepts, nothing for types it refuses (higher-order Lagrange/Bezier
+/// cells, unknown numbers). VTK's filters index points by these counts without checking them.
+constexpr int kVariable = -1;
+std::optional<int> pointsOfCellType(int type)
+{
+    switch (type) {
+    case VTK_EMPTY_CELL: return 0;
+    case VTK_VERTEX: return 1;
+    case VTK_LINE: return 2;
+    case VTK_TRIANGLE: return 3;
+    case VTK_PIXEL:
+    case VTK_QUAD:
+    case VTK_TETRA: return 4;
+    case VTK_VOXEL:
+    case VTK_HEXAHEDRON: return 8;
+    case VTK_WEDGE: return 6;
+    case VTK_PYRAMID: return 5;
+    case VTK_PENTAGONAL_PRISM: return 10;
+    case VTK_HEXAGONAL_PRISM: return 12;
+    case VTK_QUADRATIC_EDGE: return 3;
+    case VTK_QUADRATIC_TRIANGLE: return 6;
+    case VTK_QUADRATIC_QUAD: return 8;
+    case VTK_QUADRATIC_TETRA: return 10;
+    case VTK_QUADRATIC_HEXAHEDRON: return 20;
+    case VTK_QUADRATIC_WEDGE: return 15;
+    case VTK_QUADRATIC_PYRAMID: return 13;
+    case VTK_BIQUADRATIC_QUAD: return 9;
+    case VTK_TRIQUADRATIC_HEXAHEDRON: return 27;
+    case VTK_QUADRATIC_LINEAR_QUAD: return 6;
+    case VTK_QUADRATIC_LINEAR_WEDGE: return 12;
+    case VTK_BIQUADRATIC_QUADRATIC_WEDGE: return 18;
+    case VTK_BIQUADRATIC_QUADRATIC_HEXAHEDRON: return 24;
+    case VTK_BIQUADRATIC_TRIANGLE: return 7;
+    case VTK_CUBIC_LINE: return 4;
+    case VTK_TRIQUADRATIC_PYRAMID: return 19;
+    case VTK_POLY_VERTEX:
+    case VTK_POLY_LINE:
+    case VTK_TRIANGLE_STRIP:
+    case VTK_POLYGON:
+    case VTK_QUADRATIC_POLYGON:
+    case VTK_CONVEX_POINT_SET:
+    case VTK_POLYHEDRON: return kVariable;
+    default: return std::nullopt;
+    }
+}
+
+/// A polyhedron's face stream (vtkUnstructuredGrid::GetFaces at its location): in the array, each
+/// face's points among the cell's own points. VTK's polyhedron follows the stream unchecked.
+void checkPolyhedronFaces(vtkUnstructuredGrid* ug, vtkIdType c, const std::set<vtkIdType>& cellPoints,
+                          const std::string& where, const std::string& path)
+{
+    vtkIdTypeArray* faces = ug->GetFaces();
+    vtkIdTypeArray* locations = ug->GetFaceLocations();
+    if (!faces || !locations || c >= locations->GetNumberOfTuples())
+        detail::inputError(path, where + " is a polyhedron without faces");
+    const vtkIdType n = faces->GetNumberOfTuples();
+    vtkIdType at = locations->GetValue(c);
+    auto next = [&]() -> vtkIdType {
+        if (at < 0 || at >= n) detail::inputError(path, where + " (a polyhedron) has a face list that runs past the faces array");
+        return faces->GetValue(at++);
+    };
+    const vtkIdType nFaces = next();
+    if (nFaces < 4 || nFaces > n) detail::inputError(path, where + " (a polyhedron) has " + std::to_string(nFaces) + " faces");
+    for (vtkIdType f = 0; f < nFaces; ++f) {
+        const vtkIdType nPts = next();
+        if (nPts < 3 || nPts > n) detail::inputError(path, where + " (a polyhedron) has a face of " + std::to_string(nPts) + " points");
+        for (vtkIdType k = 0; k < nPts; ++k)
+            if (!cellPoints.count(next()))
+                detail::inputError(path, where + " (a polyhedron) has a face point that is not one of the cell's points");
+    }
+}
+
+/// The cells refer to points that exist, in the numbers their types need, and their arrays agree
+/// (VTK's readers accept a connectivity index past the points, a hexahedron of three points or an
+/// unknown type code, and its filters then read out of bounds).
+void checkCells(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves, const std::string& path)
+{
+    for (std::size_t b = 0; b < leaves.size(); ++b) {
+        const std::string block = leaves.size() > 1 ? " of block " + std::to_string(b) : "";
+        if (auto* sg = vtkStructuredGrid::SafeDownCast(leaves[b])) {
+            int d[3];
+            sg->GetDimensions(d);
+            if (vtkIdType(d[0]) * d[1] * d[2] != sg->GetNumberOfPoints())
+                detail::inputError(path, "structured grid" + block + " has dimensions " + std::to_string(d[0]) + "x"
+                                         + std::to_string(d[1]) + "x" + std::to_string(d[2]) + " but "
+                                         + std::to_string(sg->GetNumberOfPoints()) + " points");
+            continue;
+        }
+        auto* ug = vtkUnstructuredGrid::SafeDownCast(leaves[b]);
+        if (!ug) continue; // image and rectilinear data: implicit cells
+        vtkCellArray* cells = ug->GetCells();
+        vtkUnsignedCharArray* types = ug->GetCellTypesArray();
+        const vtkIdType nCells = ug->GetNumberOfCells(), nPoints = ug->GetNumberOfPoints();
+        if (!cells || !cells->IsValid())
+            detail::inputError(path, "cell offsets" + block + " are inconsistent with the connectivity");
+        if (!types || types->GetNumberOfTuples() != nCells)
+            detail::inputError(path, "has " + std::to_string(types ? types->GetNumberOfTuples() : 0) + " cell types"
+                                     + block + " for " + std::to_string(nCells) + " cells");
+        vtkNew<vtkIdList> ids;
+        std::set<vtkIdType> cellPoints;
+        for (vtkIdType c = 0; c < nCells; ++c) {
+            const int type = types->GetValue(c);
+            const std::string where = "cell " + std::to_string(c) + block;
+            const std::optional<int> want = pointsOfCellType(type);
+            if (!want)
+                detail::inputError(path, where + " has VTK cell type " + std::to_string(type) + " ("
+                                         + vtkCellTypes::GetClassNameFromTypeId(type)
+                                         + "), which licvdb does not read: linear and quadratic cells are supported");
+            cells->GetCellAtId(c, ids);
+            const vtkIdType count = ids->GetNumberOfIds();
+            if (*want != kVariable && count != *want)
+                detail::inputError(path, where + " (" + vtkCellTypes::GetClassNameFromTypeId(type) + ") has "
+                                         + std::to_string(count) + " points; the type needs " + std::to_string(*want));
+            if (*want == kVariable && count < 1)
+                detail::inputError(path, where + " (" + vtkCellTypes::GetClassNameFromTypeId(type) + ") has no points");
+            for (vtkIdType k = 0; k < count; ++k)
+                if (ids->GetId(k) < 0 || ids->GetId(k) >= nPoints)
+                    detail::inputError(path, where + " refers to point " + std::to_string(ids->GetId(k)) + "; the mesh"
+                                             + block + " has " + std::to_string(nPoints) + " points");
+            if (type == VTK_POLYHEDRON) {
+                cellPoints.clear();
+                cellPoints.insert(ids->begin(), ids->end());
+                checkPolyhedronFaces(ug, c, cellPoints, where, path);
+            }
+        }
+    }
+}
+
 /// The velocity array's name: `wanted`, or U / velocity / vel / v (any case), or the only
 /// 3-component array. It must be in every block.
 std::string chooseVelocity(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves, const std::string& wanted,
@@ -561,6 +699,7 @@ Mesh readMesh(const std::string& path, const std::string& format, const MeshOpti
                                  + "; expected " + describeFormat(format) + " with volume cells");
     checkTupleCounts(m.leaves, path);
     checkPoints(m.leaves, path);
+    checkCells(m.leaves, path);
     const auto box = boundsOf(m.leaves);
     for (int a = 0; a < 3; ++a)
         if (!(box[1][a] > box[0][a]))
