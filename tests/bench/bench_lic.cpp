@@ -1,10 +1,13 @@
 // Fast-LIC vs naive LIC on a noise bake of a 64³ ABC field at upsample 2 (128³ output voxels),
 // as `licvdb bake` runs it (bricks, the noise made per brick), 2 threads.
 //
-// `reference_naive` is a plain naive gather loop written here, independent of the engines: for
-// every output voxel, ±40 RK4 steps of 0.5 voxel through a dense copy of the field with its own
-// trilinear interpolation, averaging the same binomial noise. It is the yardstick of issue 13's
-// targets (fast ≥ 15× faster, goal 30×).
+// `reference_naive` is the yardstick (issue 29): a naive LIC as a competent engineer writes it in
+// an afternoon, independent of the engines — float; the field resampled once into dense arrays at
+// the output resolution; hand-written trilinear interpolation; unit-speed RK4; ±40 steps of ½
+// output voxel; the same binomial noise looked up at the nearest output voxel; two plain threads.
+// It reports ns_per_step_core (CPU time per RK4 step). Until 2026-12 this row was a slower loop
+// (double precision through openvdb::Vec3d, clamped lookups, Noise::sample: ~580 ns per step), which
+// made fast-LIC look 19× faster than it is against this one.
 //
 // Run: build/tests/bench_lic [--benchmark_filter=fast]   (the naive rows take ~10–25 s each)
 #include "lic/engine/Engine.h"
@@ -14,13 +17,13 @@
 
 #include <benchmark/benchmark.h>
 
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
+#include <openvdb/tools/Interpolation.h>
 
 #include <sys/resource.h>
 
 #include <cmath>
 #include <mutex>
+#include <thread>
 #include <vector>
 
 namespace {
@@ -105,84 +108,126 @@ void bake(benchmark::State& state, lic::EngineType engine, double length, int br
     report(state, stats);
 }
 
-/// Independent plain naive LIC (see the file comment).
+/// The tight naive LIC (see the file comment): float, the field and the noise as dense arrays at
+/// the output resolution, hand-written trilinear interpolation, unit-speed RK4, nearest-voxel
+/// noise, ±40 steps of ½ voxel, two plain threads each taking every other x slab.
+struct TightInputs
+{
+    int n[3] = {0, 0, 0};                    // output voxels per axis
+    std::vector<float> vx, vy, vz, noise;    // [(i * n1 + j) * n2 + k]
+    std::size_t at(int i, int j, int k) const { return (std::size_t(i) * n[1] + j) * n[2] + k; }
+};
+
+/// The ABC field resampled trilinearly at the output voxels' centres (OpenVDB's own sampler), and
+/// the noise texture's values at the output voxels: inputs, not timed.
+const TightInputs& tightInputs()
+{
+    static const TightInputs in = [] {
+        Setup& s = setup();
+        TightInputs t;
+        const openvdb::CoordBBox ob = s.domain.indexBBox();
+        for (int a = 0; a < 3; ++a) t.n[a] = ob.dim()[a];
+        const std::size_t count = std::size_t(t.n[0]) * t.n[1] * t.n[2];
+        t.vx.resize(count), t.vy.resize(count), t.vz.resize(count), t.noise.resize(count);
+        const double K = s.domain.upsample();
+        openvdb::tools::GridSampler<openvdb::Vec3SGrid, openvdb::tools::BoxSampler> sampler(*s.preset.velocity);
+        for (int i = 0; i < t.n[0]; ++i)
+            for (int j = 0; j < t.n[1]; ++j)
+                for (int k = 0; k < t.n[2]; ++k) {
+                    const openvdb::Coord o = ob.min() + openvdb::Coord(i, j, k);
+                    const openvdb::Vec3d fieldIndex((o[0] + 0.5) / K - 0.5, (o[1] + 0.5) / K - 0.5, (o[2] + 0.5) / K - 0.5);
+                    const openvdb::Vec3s v = sampler.isSample(fieldIndex);
+                    const std::size_t c = t.at(i, j, k);
+                    t.vx[c] = v[0], t.vy[c] = v[1], t.vz[c] = v[2];
+                    t.noise[c] = s.noise.voxel(o);
+                }
+        return t;
+    }();
+    return in;
+}
+
+/// Trilinear velocity at output-index position p (voxel centres at integers), normalised; false
+/// outside [0, n-1] or at zero speed.
+inline bool tightDir(const TightInputs& t, float px, float py, float pz, float d[3])
+{
+    if (!(px >= 0.f && py >= 0.f && pz >= 0.f && px <= float(t.n[0] - 1) && py <= float(t.n[1] - 1) && pz <= float(t.n[2] - 1)))
+        return false;
+    const int i = std::min(int(px), t.n[0] - 2), j = std::min(int(py), t.n[1] - 2), k = std::min(int(pz), t.n[2] - 2);
+    const float fx = px - float(i), fy = py - float(j), fz = pz - float(k);
+    const std::size_t c000 = t.at(i, j, k), dk = 1, dj = std::size_t(t.n[2]), di = std::size_t(t.n[1]) * t.n[2];
+    float v[3];
+    const float* comp[3] = {t.vx.data(), t.vy.data(), t.vz.data()};
+    for (int a = 0; a < 3; ++a) {
+        const float* f = comp[a] + c000;
+        const float c00 = f[0] + fz * (f[dk] - f[0]), c01 = f[dj] + fz * (f[dj + dk] - f[dj]);
+        const float c10 = f[di] + fz * (f[di + dk] - f[di]), c11 = f[di + dj] + fz * (f[di + dj + dk] - f[di + dj]);
+        const float c0 = c00 + fy * (c01 - c00), c1 = c10 + fy * (c11 - c10);
+        v[a] = c0 + fx * (c1 - c0);
+    }
+    const float len2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    if (!(len2 > 1e-18f)) return false;
+    const float inv = 1.f / std::sqrt(len2);
+    d[0] = v[0] * inv, d[1] = v[1] * inv, d[2] = v[2] * inv;
+    return true;
+}
+
+/// One output voxel's LIC value; adds the RK4 steps taken to `steps`.
+inline float tightVoxel(const TightInputs& t, int i, int j, int k, std::uint64_t& steps)
+{
+    constexpr float h = 0.5f; // output voxels
+    float sum = t.noise[t.at(i, j, k)];
+    int count = 1;
+    for (const float sign : {1.f, -1.f}) {
+        const float hs = h * sign;
+        float x = float(i), y = float(j), z = float(k), k1[3], k2[3], k3[3], k4[3];
+        for (int step = 0; step < 40; ++step) {
+            if (!tightDir(t, x, y, z, k1) || !tightDir(t, x + 0.5f * hs * k1[0], y + 0.5f * hs * k1[1], z + 0.5f * hs * k1[2], k2)
+                || !tightDir(t, x + 0.5f * hs * k2[0], y + 0.5f * hs * k2[1], z + 0.5f * hs * k2[2], k3)
+                || !tightDir(t, x + hs * k3[0], y + hs * k3[1], z + hs * k3[2], k4))
+                break;
+            x += hs / 6.f * (k1[0] + 2.f * (k2[0] + k3[0]) + k4[0]);
+            y += hs / 6.f * (k1[1] + 2.f * (k2[1] + k3[1]) + k4[1]);
+            z += hs / 6.f * (k1[2] + 2.f * (k2[2] + k3[2]) + k4[2]);
+            ++steps;
+            const int ni = std::clamp(int(x + 0.5f), 0, t.n[0] - 1), nj = std::clamp(int(y + 0.5f), 0, t.n[1] - 1);
+            const int nk = std::clamp(int(z + 0.5f), 0, t.n[2] - 1);
+            sum += t.noise[t.at(ni, nj, nk)];
+            ++count;
+        }
+    }
+    return sum / float(count);
+}
+
 void referenceNaive(benchmark::State& state)
 {
-    Setup& s = setup();
-    const openvdb::Vec3SGrid& g = *s.preset.velocity;
-    const openvdb::CoordBBox fb = g.evalActiveVoxelBoundingBox();
-    const openvdb::Coord dim = fb.dim();
-    std::vector<openvdb::Vec3f> dense(std::size_t{0} + std::size_t(dim[0]) * std::size_t(dim[1]) * std::size_t(dim[2]));
-    {
-        auto acc = g.getConstAccessor();
-        for (int i = 0; i < dim[0]; ++i)
-            for (int j = 0; j < dim[1]; ++j)
-                for (int k = 0; k < dim[2]; ++k)
-                    dense[(std::size_t(i) * dim[1] + j) * dim[2] + k] = acc.getValue(fb.min() + openvdb::Coord(i, j, k));
-    }
-    const double K = 2.0;                         // upsample
-    const double h = 0.5 / K;                     // 0.5 output voxel, in field voxels
-    const openvdb::Vec3d lo = fb.min().asVec3d() - openvdb::Vec3d(0.5), hi = fb.max().asVec3d() + openvdb::Vec3d(0.5);
-    // Unit direction at a field-index position; false outside or at zero speed. Trilinear, each
-    // axis' two lattice indices clamped to the box (the outer half voxel repeats the edge).
-    auto dir = [&](const openvdb::Vec3d& p, openvdb::Vec3d& d) {
-        for (int a = 0; a < 3; ++a)
-            if (p[a] < lo[a] || p[a] > hi[a]) return false;
-        const openvdb::Vec3d q = p - fb.min().asVec3d();
-        const double x = std::floor(q[0]), y = std::floor(q[1]), z = std::floor(q[2]);
-        const double fx = q[0] - x, fy = q[1] - y, fz = q[2] - z;
-        const std::size_t i0 = std::clamp(int(x), 0, dim[0] - 1), i1 = std::clamp(int(x) + 1, 0, dim[0] - 1);
-        const std::size_t j0 = std::clamp(int(y), 0, dim[1] - 1), j1 = std::clamp(int(y) + 1, 0, dim[1] - 1);
-        const std::size_t k0 = std::clamp(int(z), 0, dim[2] - 1), k1 = std::clamp(int(z) + 1, 0, dim[2] - 1);
-        auto at = [&](std::size_t i, std::size_t j, std::size_t k) {
-            return openvdb::Vec3d(dense[(i * dim[1] + j) * dim[2] + k]);
-        };
-        const openvdb::Vec3d c00 = at(i0, j0, k0) * (1 - fz) + at(i0, j0, k1) * fz;
-        const openvdb::Vec3d c01 = at(i0, j1, k0) * (1 - fz) + at(i0, j1, k1) * fz;
-        const openvdb::Vec3d c10 = at(i1, j0, k0) * (1 - fz) + at(i1, j0, k1) * fz;
-        const openvdb::Vec3d c11 = at(i1, j1, k0) * (1 - fz) + at(i1, j1, k1) * fz;
-        const openvdb::Vec3d v = (c00 * (1 - fy) + c01 * fy) * (1 - fx) + (c10 * (1 - fy) + c11 * fy) * fx;
-        const double len = v.length();
-        if (!(len > 1e-9)) return false;
-        d = v / len;
-        return true;
-    };
-    const openvdb::CoordBBox ob = s.domain.indexBBox();
-    const std::size_t n = std::size_t(ob.dim()[0]) * ob.dim()[1] * ob.dim()[2];
-    std::vector<float> out(n);
-    tbb::task_arena arena(kThreads);
-    CpuTimer cpu{state};
+    const TightInputs& t = tightInputs();
+    std::vector<float> out(t.vx.size());
+    std::uint64_t steps = 0;
+    const double cpuStart = processCpuSeconds();
     for (auto _ : state) {
-        arena.execute([&] {
-            tbb::parallel_for(std::size_t(0), n, [&](std::size_t v) {
-                const int i = int(v / (std::size_t(ob.dim()[1]) * ob.dim()[2]));
-                const int j = int((v / ob.dim()[2]) % ob.dim()[1]), k = int(v % ob.dim()[2]);
-                const openvdb::Coord o = ob.min() + openvdb::Coord(i, j, k);
-                const openvdb::Vec3d seed((o[0] + 0.5) / K - 0.5, (o[1] + 0.5) / K - 0.5, (o[2] + 0.5) / K - 0.5);
-                float t;
-                s.noise.sample(o.asVec3d(), &t);
-                double sum = t;
-                int count = 1;
-                for (double sign : {1.0, -1.0}) {
-                    openvdb::Vec3d x = seed, k1, k2, k3, k4;
-                    for (int step = 0; step < 40; ++step) {
-                        if (!dir(x, k1) || !dir(x + k1 * (0.5 * h * sign), k2) || !dir(x + k2 * (0.5 * h * sign), k3) ||
-                            !dir(x + k3 * (h * sign), k4))
-                            break;
-                        x += (k1 + 2.0 * (k2 + k3) + k4) * (h * sign / 6.0);
-                        s.noise.sample((x + openvdb::Vec3d(0.5)) * K - openvdb::Vec3d(0.5), &t);
-                        sum += t;
-                        ++count;
-                    }
-                }
-                out[v] = float(sum / count);
+        std::uint64_t perThread[kThreads] = {};
+        std::vector<std::thread> threads;
+        for (int w = 0; w < kThreads; ++w)
+            threads.emplace_back([&, w] {
+                std::uint64_t n = 0;
+                for (int i = w; i < t.n[0]; i += kThreads)
+                    for (int j = 0; j < t.n[1]; ++j)
+                        for (int k = 0; k < t.n[2]; ++k) out[t.at(i, j, k)] = tightVoxel(t, i, j, k, n);
+                perThread[w] = n;
             });
-        });
+        for (auto& th : threads) th.join();
+        steps = 0;
+        for (const auto n : perThread) steps += n;
         benchmark::DoNotOptimize(out.data());
     }
     lic::LicStats stats;
-    stats.voxels = n;
+    stats.voxels = out.size();
     report(state, stats);
+    const double cpu = (processCpuSeconds() - cpuStart) / double(state.iterations());
+    state.counters["cpu_s"] = cpu;
+    state.counters["rk4_steps"] = double(steps);
+    // CPU time over steps: the cost of one RK4 step on one core (the yardstick of issue 29).
+    state.counters["ns_per_step_core"] = 1e9 * cpu / double(steps);
 }
 
 using lic::EngineType;
