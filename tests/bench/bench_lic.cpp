@@ -6,8 +6,8 @@
 // the output resolution; hand-written trilinear interpolation; unit-speed RK4; ±40 steps of ½
 // output voxel; the same binomial noise looked up at the nearest output voxel; two plain threads.
 // It reports ns_per_step_core (CPU time per RK4 step). Until 2026-12 this row was a slower loop
-// (double precision through openvdb::Vec3d, clamped lookups, Noise::sample: ~580 ns per step), which
-// made fast-LIC look 19× faster than it is against this one.
+// (double precision through openvdb::Vec3d, clamped lookups, Noise::sample), 1.5× slower than this
+// one on a quiet machine (docs/performance.md, "The yardstick").
 //
 // Run: build/tests/bench_lic [--benchmark_filter=fast]   (the naive rows take ~10–25 s each)
 #include "lic/engine/Engine.h"
