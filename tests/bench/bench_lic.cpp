@@ -65,7 +65,9 @@ struct CpuTimer
 {
     benchmark::State& state;
     double start = processCpuSeconds();
-    ~CpuTimer() { state.counters["cpu_s"] = (processCpuSeconds() - start) / double(state.iterations()); }
+    /// Process CPU seconds per iteration so far.
+    double perIteration() const { return (processCpuSeconds() - start) / double(state.iterations()); }
+    ~CpuTimer() { state.counters["cpu_s"] = perIteration(); }
 };
 
 void report(benchmark::State& state, const lic::LicStats& stats)
@@ -203,7 +205,7 @@ void referenceNaive(benchmark::State& state)
     const TightInputs& t = tightInputs();
     std::vector<float> out(t.vx.size());
     std::uint64_t steps = 0;
-    const double cpuStart = processCpuSeconds();
+    CpuTimer cpu{state};
     for (auto _ : state) {
         std::uint64_t perThread[kThreads] = {};
         std::vector<std::thread> threads;
@@ -223,11 +225,9 @@ void referenceNaive(benchmark::State& state)
     lic::LicStats stats;
     stats.voxels = out.size();
     report(state, stats);
-    const double cpu = (processCpuSeconds() - cpuStart) / double(state.iterations());
-    state.counters["cpu_s"] = cpu;
     state.counters["rk4_steps"] = double(steps);
     // CPU time over steps: the cost of one RK4 step on one core (the yardstick of issue 29).
-    state.counters["ns_per_step_core"] = 1e9 * cpu / double(steps);
+    state.counters["ns_per_step_core"] = 1e9 * cpu.perIteration() / double(steps);
 }
 
 using lic::EngineType;

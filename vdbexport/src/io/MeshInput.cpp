@@ -475,26 +475,27 @@ std::optional<int> pointsOfCellType(int type)
 /// A polyhedron's face stream (vtkUnstructuredGrid::GetFaces at its location): in the array, each
 /// face's points among the cell's own points. VTK's polyhedron follows the stream unchecked.
 void checkPolyhedronFaces(vtkUnstructuredGrid* ug, vtkIdType c, const std::set<vtkIdType>& cellPoints,
-                          const std::string& where, const std::string& path)
+                          const std::string& block, const std::string& path)
 {
+    const auto where = [&] { return "cell " + std::to_string(c) + block; };
     vtkIdTypeArray* faces = ug->GetFaces();
     vtkIdTypeArray* locations = ug->GetFaceLocations();
     if (!faces || !locations || c >= locations->GetNumberOfTuples())
-        detail::inputError(path, where + " is a polyhedron without faces");
+        detail::inputError(path, where() + " is a polyhedron without faces");
     const vtkIdType n = faces->GetNumberOfTuples();
     vtkIdType at = locations->GetValue(c);
     auto next = [&]() -> vtkIdType {
-        if (at < 0 || at >= n) detail::inputError(path, where + " (a polyhedron) has a face list that runs past the faces array");
+        if (at < 0 || at >= n) detail::inputError(path, where() + " (a polyhedron) has a face list that runs past the faces array");
         return faces->GetValue(at++);
     };
     const vtkIdType nFaces = next();
-    if (nFaces < 4 || nFaces > n) detail::inputError(path, where + " (a polyhedron) has " + std::to_string(nFaces) + " faces");
+    if (nFaces < 4 || nFaces > n) detail::inputError(path, where() + " (a polyhedron) has " + std::to_string(nFaces) + " faces");
     for (vtkIdType f = 0; f < nFaces; ++f) {
         const vtkIdType nPts = next();
-        if (nPts < 3 || nPts > n) detail::inputError(path, where + " (a polyhedron) has a face of " + std::to_string(nPts) + " points");
+        if (nPts < 3 || nPts > n) detail::inputError(path, where() + " (a polyhedron) has a face of " + std::to_string(nPts) + " points");
         for (vtkIdType k = 0; k < nPts; ++k)
             if (!cellPoints.count(next()))
-                detail::inputError(path, where + " (a polyhedron) has a face point that is not one of the cell's points");
+                detail::inputError(path, where() + " (a polyhedron) has a face point that is not one of the cell's points");
     }
 }
 
@@ -528,27 +529,28 @@ void checkCells(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves, const st
         std::set<vtkIdType> cellPoints;
         for (vtkIdType c = 0; c < nCells; ++c) {
             const int type = types->GetValue(c);
-            const std::string where = "cell " + std::to_string(c) + block;
+            // The cell's name for a message, built only when there is one to give (10 M cells).
+            auto where = [&] { return "cell " + std::to_string(c) + block; };
+            auto named = [&] { return where() + " (" + vtkCellTypes::GetClassNameFromTypeId(type) + ")"; };
             const std::optional<int> want = pointsOfCellType(type);
             if (!want)
-                detail::inputError(path, where + " has VTK cell type " + std::to_string(type) + " ("
+                detail::inputError(path, where() + " has VTK cell type " + std::to_string(type) + " ("
                                          + vtkCellTypes::GetClassNameFromTypeId(type)
                                          + "), which licvdb does not read: linear and quadratic cells are supported");
             cells->GetCellAtId(c, ids);
             const vtkIdType count = ids->GetNumberOfIds();
             if (*want != kVariable && count != *want)
-                detail::inputError(path, where + " (" + vtkCellTypes::GetClassNameFromTypeId(type) + ") has "
-                                         + std::to_string(count) + " points; the type needs " + std::to_string(*want));
-            if (*want == kVariable && count < 1)
-                detail::inputError(path, where + " (" + vtkCellTypes::GetClassNameFromTypeId(type) + ") has no points");
+                detail::inputError(path, named() + " has " + std::to_string(count) + " points; the type needs "
+                                         + std::to_string(*want));
+            if (*want == kVariable && count < 1) detail::inputError(path, named() + " has no points");
             for (vtkIdType k = 0; k < count; ++k)
                 if (ids->GetId(k) < 0 || ids->GetId(k) >= nPoints)
-                    detail::inputError(path, where + " refers to point " + std::to_string(ids->GetId(k)) + "; the mesh"
+                    detail::inputError(path, where() + " refers to point " + std::to_string(ids->GetId(k)) + "; the mesh"
                                              + block + " has " + std::to_string(nPoints) + " points");
             if (type == VTK_POLYHEDRON) {
                 cellPoints.clear();
                 cellPoints.insert(ids->begin(), ids->end());
-                checkPolyhedronFaces(ug, c, cellPoints, where, path);
+                checkPolyhedronFaces(ug, c, cellPoints, block, path);
             }
         }
     }
