@@ -19,6 +19,7 @@ What each guard is for, and where the facts come from, is in docs/blender.md, "B
   centres. Cycles 5.x loads grids only through NanoVDB (a build without it renders no volume),
   so there it is never half a voxel off. Measured by renders in 3.4.1 and 4.3.2
   (tests/blender/test_render.py); docs/blender.md, "Placement".
+- ``has_volume_velocity(volume)``: a Volume's velocity grid for Cycles motion blur (3.1+).
 """
 
 import bpy
@@ -77,3 +78,9 @@ def cycles_draws_voxels_half_off() -> bool:
     """True where Cycles draws OpenVDB voxel i over [i, i + 1] (its dense-texture path: before 5.0,
     without NanoVDB, taken to be a distribution build), so imports shift by −½ voxel."""
     return bpy.app.version < CYCLES_NANOVDB_ONLY_IN and is_distribution_build()
+
+
+def has_volume_velocity(volume) -> bool:
+    """True where a Volume names its velocity grid for motion blur (``velocity_grid``,
+    ``velocity_unit``, ``velocity_scale``: Blender 3.1+)."""
+    return all(hasattr(volume, a) for a in ("velocity_grid", "velocity_unit", "velocity_scale"))

@@ -9,7 +9,7 @@ from bpy_extras.io_utils import ImportHelper
 from . import manifest as mf
 from mathutils import Matrix, Vector
 
-from . import check, material, prefs, props
+from . import check, compat, material, prefs, props
 
 
 #: (brightness, line absorption) for dense (noise) bakes; sparse line bakes keep the panel's
@@ -69,6 +69,7 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
         bpy.data.volumes.remove(vol)
         raise BakeImportError(f"{first} has no \"density\" grid (grids: {', '.join(loaded) or 'none'}); "
                               "is it a licvdb bake?")
+    set_velocity_grid(vol, loaded)
     n = len(files)
     if n > 1:
         vol.grids.unload()
@@ -115,6 +116,18 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
     if setup_render:
         material.setup_render(scene)
     return obj
+
+
+def set_velocity_grid(vol, loaded) -> bool:
+    """Make a bake's ``velocity`` grid (licvdb --write-velocity: world units per second, the flow
+    or how a loop's lines travel) the volume's velocity, so Cycles motion blur streaks the lines
+    along the flow. Returns whether it did (False when the bake has no such grid)."""
+    if "velocity" not in loaded or not compat.has_volume_velocity(vol):
+        return False
+    vol.velocity_grid = "velocity"
+    vol.velocity_unit = "SECOND"
+    vol.velocity_scale = 1.0
+    return True
 
 
 def _voxel_size_guess(man) -> float:

@@ -9,6 +9,8 @@
 #include "ManifestDigests.h"
 
 #include "lic/util/Error.h"
+#include "lic/engine/Kernels.h"
+#include "lic/field/Field.h"
 #include "lic/field/Presets.h"
 #include "lic/field/Scalars.h"
 
@@ -416,4 +418,73 @@ TEST(ScalarSet, AbsSuffixIsTheMagnitudeOfAnyScalar)
         }
     }
     EXPECT_THROW(set.get("no-such-grid-abs"), lic::InputError);
+}
+
+namespace {
+openvdb::GridBase::Ptr readGrid(const std::string& path, const std::string& name)
+{
+    openvdb::io::File file(path);
+    file.open();
+    openvdb::GridBase::Ptr g = file.readGrid(name);
+    file.close();
+    return g;
+}
+} // namespace
+
+TEST_F(StreamBake, VelocityGridGivesTheMotionOfTheLines)
+{
+    // --write-velocity: a vec3s `velocity` grid on the output's voxels, world units per second.
+    // A still: the flow itself. A comet loop: the flow's direction at the comets' one speed,
+    // P / N output voxels per frame at field.fps. A noise loop: the ripple's speed.
+    const lic::PresetField jet = lic::makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36));
+    const lic::VelocityField field(jet.velocity);
+    auto check = [&](const std::string& path, double speed, const std::string& what) {
+        const auto density = openvdb::gridPtrCast<openvdb::FloatGrid>(readGrid(path, "density"));
+        const auto velocity = openvdb::gridPtrCast<openvdb::Vec3SGrid>(readGrid(path, "velocity"));
+        ASSERT_TRUE(density && velocity) << what;
+        EXPECT_TRUE(velocity->tree().hasSameTopology(density->tree())) << what;
+        EXPECT_EQ(velocity->getVectorType(), openvdb::VEC_CONTRAVARIANT_RELATIVE) << what;
+        std::size_t n = 0, moving = 0;
+        for (auto it = velocity->cbeginValueOn(); it; ++it, ++n) {
+            const openvdb::Vec3d world = velocity->indexToWorld(it.getCoord());
+            openvdb::Vec3d v;
+            ASSERT_TRUE(field.sample(world, v)) << what;
+            const openvdb::Vec3d got(*it);
+            if (speed == 0) { // the flow itself
+                ASSERT_LE((got - v).length(), 1e-5 * (1.0 + v.length())) << what << " at " << it.getCoord();
+                continue;
+            }
+            if (v.length() < field.maxSpeed() * 1e-6) continue;
+            ++moving;
+            ASSERT_NEAR(got.length(), speed, 1e-5 * speed) << what << " at " << it.getCoord();
+            ASSERT_GT(got.dot(v) / (got.length() * v.length()), 0.9999) << what << ": not along the flow";
+        }
+        EXPECT_GT(n, 1000u) << what;
+        if (speed > 0) EXPECT_GT(moving, n / 2) << what;
+    };
+    auto still = spotRecipe("vel_still.vdb");
+    still.output.writeVelocity = true;
+    vdbexport::bake(still);
+    check(still.output.path, 0.0, "spot still");
+
+    auto loop = spotRecipe("vel_loop.vdb");
+    loop.output.writeVelocity = true;
+    loop.animation.frames = 6;
+    loop.field.fps = 30;
+    vdbexport::bake(loop);
+    // Output voxel: field voxel / upsample 2; comet spacing from the settings the bake used.
+    lic::LicSettings s;
+    s.length = loop.lic.length;
+    s.step = loop.lic.step;
+    s.kernel = lic::KernelType::Box;
+    const double voxel = jet.velocity->voxelSize()[0] / 2.0;
+    const double cometSpeed = lic::cometSpacing(s, 2.0 * loop.input.haloScale) / 6.0 * voxel * 30.0; // widest halo
+    for (int f = 1; f <= 6; ++f) check(vdbexport::framePath(loop.output.path, f, 6), cometSpeed, "comet loop frame " + std::to_string(f));
+
+    auto noise = recipe("vel_noise.vdb");
+    noise.output.writeVelocity = true;
+    noise.animation.frames = 4;
+    vdbexport::bake(noise);
+    const double rippleSpeed = double(2 * s.halfSamples() + 1) * s.step / 4.0 * voxel * noise.field.fps;
+    check(vdbexport::framePath(noise.output.path, 1, 4), rippleSpeed, "noise loop");
 }

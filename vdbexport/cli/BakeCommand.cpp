@@ -148,6 +148,9 @@ void BakeCommand::addOutputFlags()
     RecipeFlags& f = *mFlags;
     f.flag("--write-input", "output.write_input", "Also write the input texture as grid `input`");
     f.flag("--write-tangent", "output.write_tangent", "Also write the unit flow direction as vec3s grid `tangent`");
+    f.flag("--write-velocity", "output.write_velocity",
+           "Also write vec3s grid `velocity` (world units per second: the flow, or how a loop's lines travel) "
+           "for motion blur");
     f.flag("--half", "output.half", "Store grids as 16-bit half floats on disk (about half the file size)");
 }
 

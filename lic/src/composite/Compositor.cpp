@@ -21,6 +21,16 @@ double unitOf(const ScalarField& s, const openvdb::Vec3d& world, const std::arra
 {
     return std::clamp((double(s.at(world)) - range[0]) / (range[1] - range[0]), 0.0, 1.0);
 }
+
+/// Texture channel c of loop frame f (1-based) from a voxel's raw channels: composed from the
+/// ripple sums, or read directly from a comet loop's frame-major channels.
+template<typename Raw>
+float loopFrameValue(const CompositeSettings& s, const Raw& raw, int c, int f, const FramePhase& ph)
+{
+    const int C = s.textureChannels();
+    if (s.comets) return raw((f - 1) * C + c);
+    return rippleFrameValue(raw(c), raw(C + c), raw(2 * C + c), raw(3 * C), raw(3 * C + 1), ph);
+}
 } // namespace
 
 Compositor::Compositor(const CompositeSettings& settings, CompositeInputs inputs, const VelocityField& field,
@@ -35,30 +45,34 @@ Compositor::Compositor(const CompositeSettings& settings, CompositeInputs inputs
     if (s.writeInput && !(s.spots ? mInputs.spots != nullptr : mInputs.noise != nullptr))
         throw InputError("writing the input grid needs the input texture");
     const std::size_t blocks = domain.blockCount();
-    const bool keepRaw = !s.spots || s.frames > 1;
-    if (keepRaw) {
+    if (!s.composesOnArrival()) {
         mRawLeaves.resize(std::size_t(s.rawChannels()));
         for (auto& set : mRawLeaves) set.init(blocks);
         if (s.spots && mInputs.width && s.levels > 1) mWidthLeaves.init(blocks);
         if (mInputs.roi) mRoiLeaves.init(blocks);
     } else {
-        mDensity.init(blocks);
-        mHalo.init(blocks);
-        if (s.writeSeries) {
-            mLines.resize(std::size_t(s.levels));
-            mHalos.resize(std::size_t(s.levels));
-            for (auto& set : mLines) set.init(blocks);
-            for (auto& set : mHalos) set.init(blocks);
+        mSpotFrames.resize(std::size_t(s.frames));
+        for (SpotFrame& fr : mSpotFrames) {
+            fr.density.init(blocks);
+            fr.halo.init(blocks);
+            if (s.writeSeries) {
+                fr.lines.resize(std::size_t(s.levels));
+                fr.halos.resize(std::size_t(s.levels));
+                for (auto& set : fr.lines) set.init(blocks);
+                for (auto& set : fr.halos) set.init(blocks);
+            }
         }
     }
     if (s.writeInput) mInputLeaves.init(blocks);
     if (s.writeTangent) mTangentLeaves.init(blocks);
+    if (s.writeVelocity) mVelocityLeaves.init(blocks);
     if (mInputs.color) {
         mColorLeaves.init(blocks);
         mScalarLeaves.init(blocks);
     }
     if (s.spots && s.writeInput) mInputSpots.emplace(*mInputs.spots, std::array<double, 1>{s.inputRadius}, s.haloScale);
     mMoments.assign(layout.size(), Moments{});
+    for (int f = 1; f <= s.frames; ++f) mPhases.emplace_back(f, s.frames);
 }
 
 template<typename Raw>
@@ -125,7 +139,7 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
         if (s.spots) {
             if (!keepSpotVoxel(raw, widthT, roi, b, origin, off)) continue;
         } else {
-            moments.add(frames > 1 ? rippleFrameValue(raw(0), raw(1), raw(2), raw(3), raw(4), FramePhase(1, frames))
+            moments.add(frames > 1 ? rippleFrameValue(raw(0), raw(1), raw(2), raw(3), raw(4), mPhases[0])
                                    : raw(0));
         }
         if (!mRawLeaves.empty()) {
@@ -141,28 +155,30 @@ template<typename Raw>
 bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::size_t b, const openvdb::Coord& origin,
                                openvdb::Index off)
 {
-    const int C = mSettings.textureChannels(), frames = mSettings.frames;
-    if (frames == 1) {
-        const SpotVoxel sv = composeSpots(raw, widthT, roi);
-        if (!(sv.density > kSparseEpsilon || sv.halo > kSparseEpsilon)) return false;
-        mDensity.leaf(b, origin).setValueOn(off, sv.density);
-        mHalo.leaf(b, origin).setValueOn(off, sv.halo);
-        for (std::size_t k = 0; k < mLines.size(); ++k) {
-            mLines[k].leaf(b, origin).setValueOn(off, sv.lines[k]);
-            mHalos[k].leaf(b, origin).setValueOn(off, sv.halos[k]);
-        }
-        return true;
-    }
+    const int frames = mSettings.frames;
+    auto frameVoxel = [&](int f) {
+        if (frames == 1) return composeSpots(raw, widthT, roi);
+        const FramePhase& ph = mPhases[std::size_t(f - 1)];
+        return composeSpots([&](int c) { return loopFrameValue(mSettings, raw, c, f, ph); }, widthT, roi);
+    };
+    auto showsIn = [](const SpotVoxel& sv) { return sv.density > kSparseEpsilon || sv.halo > kSparseEpsilon; };
     // Kept when any frame of the loop shows line or halo here, so every frame file has the same
     // topology.
+    const SpotVoxel first = frameVoxel(1);
+    bool shows = showsIn(first);
+    for (int f = 2; f <= frames && !shows; ++f) shows = showsIn(frameVoxel(f));
+    if (!shows || mSpotFrames.empty()) return shows;
     for (int f = 1; f <= frames; ++f) {
-        const FramePhase ph(f, frames);
-        const SpotVoxel sv = composeSpots(
-            [&](int c) { return rippleFrameValue(raw(c), raw(C + c), raw(2 * C + c), raw(3 * C), raw(3 * C + 1), ph); },
-            widthT, roi);
-        if (sv.density > kSparseEpsilon || sv.halo > kSparseEpsilon) return true;
+        const SpotVoxel sv = f == 1 ? first : frameVoxel(f);
+        SpotFrame& fr = mSpotFrames[std::size_t(f - 1)];
+        fr.density.leaf(b, origin).setValueOn(off, sv.density);
+        fr.halo.leaf(b, origin).setValueOn(off, sv.halo);
+        for (std::size_t k = 0; k < fr.lines.size(); ++k) {
+            fr.lines[k].leaf(b, origin).setValueOn(off, sv.lines[k]);
+            fr.halos[k].leaf(b, origin).setValueOn(off, sv.halos[k]);
+        }
     }
-    return false;
+    return true;
 }
 
 void Compositor::addStatic(std::size_t b, const openvdb::Coord& origin, openvdb::Index off, const openvdb::Coord& ijk,
@@ -190,6 +206,20 @@ void Compositor::addStatic(std::size_t b, const openvdb::Coord& origin, openvdb:
             if (len > mField.maxSpeed() * 1e-6) t = openvdb::Vec3s(v / len);
         }
         mTangentLeaves.leaf(b, origin).setValueOn(off, t);
+    }
+    if (mVelocityLeaves.enabled()) {
+        // How the lines move here (world units per second): a loop's pattern along the unit flow
+        // direction at its one speed, else the flow itself.
+        openvdb::Vec3d v(0.0), out(0.0);
+        if (mField.sample(world, v)) {
+            const double len = v.length();
+            if (mSettings.velocitySpeed > 0) {
+                if (len > mField.maxSpeed() * 1e-6) out = v * (mSettings.velocitySpeed / len);
+            } else {
+                out = v * mSettings.velocityScale;
+            }
+        }
+        mVelocityLeaves.leaf(b, origin).setValueOn(off, openvdb::Vec3s(out));
     }
     if (mInputs.color) {
         const double t = unitOf(mInputs.color, world, mSettings.colorRange);
@@ -233,7 +263,7 @@ void Compositor::composeLeaves(int f, LeafSet<openvdb::FloatGrid>& density, Leaf
                                std::vector<LeafSet<openvdb::FloatGrid>>& lines,
                                std::vector<LeafSet<openvdb::FloatGrid>>& halos)
 {
-    const int C = mSettings.textureChannels(), frames = mSettings.frames;
+    const int frames = mSettings.frames;
     const bool spots = mSettings.spots, inPlace = !spots && f == frames && frames == 1;
     const FramePhase ph(f, frames);
     const ContrastStretch stretch(mRaw, ContrastStretch::kSigmas, mSettings.stretch);
@@ -245,8 +275,7 @@ void Compositor::composeLeaves(int f, LeafSet<openvdb::FloatGrid>& density, Leaf
             const openvdb::Coord origin = raw0->origin();
             auto rawAt = [&](int c, openvdb::Index off) { return mRawLeaves[std::size_t(c)].at(b)->getValue(off); };
             auto value = [&](int c, openvdb::Index off) {
-                return frames > 1 ? rippleFrameValue(rawAt(c, off), rawAt(C + c, off), rawAt(2 * C + c, off),
-                                                     rawAt(3 * C, off), rawAt(3 * C + 1, off), ph)
+                return frames > 1 ? loopFrameValue(mSettings, [&](int k) { return rawAt(k, off); }, c, f, ph)
                                   : rawAt(c, off);
             };
             const FloatLeaf* roiLeaf = mRoiLeaves.enabled() ? mRoiLeaves.at(b) : nullptr;
@@ -292,10 +321,12 @@ openvdb::GridPtrVec Compositor::frame(int f)
             grids.push_back(halos[std::size_t(k)].release(mDomain, "halo_w" + std::to_string(k + 1)));
         }
     };
-    if (spots && frames == 1) {
-        grids.push_back(mDensity.release(mDomain, "density"));
-        grids.push_back(mHalo.release(mDomain, "halo"));
-        addLevels(mLines, mHalos);
+    if (mSettings.composesOnArrival()) {
+        SpotFrame& fr = mSpotFrames[std::size_t(f - 1)];
+        grids.push_back(fr.density.release(mDomain, "density"));
+        grids.push_back(fr.halo.release(mDomain, "halo"));
+        addLevels(fr.lines, fr.halos);
+        fr = SpotFrame{};
     } else {
         // Compose this frame leaf by leaf from the kept channels.
         LeafSet<openvdb::FloatGrid> density, halo;
@@ -337,6 +368,14 @@ void Compositor::buildStatic()
     mStaticBuilt = true;
     if (mInputLeaves.enabled()) mStatic.push_back(mInputLeaves.release(mDomain, "input"));
     if (mTangentLeaves.enabled()) mStatic.push_back(mTangentLeaves.release(mDomain, "tangent"));
+    if (mVelocityLeaves.enabled()) {
+        auto velocity = mVelocityLeaves.release(mDomain, "velocity");
+        velocity->setVectorType(openvdb::VEC_CONTRAVARIANT_RELATIVE);
+        velocity->insertMeta("licvdb_velocity_unit", openvdb::StringMetadata("world units per second"));
+        if (mSettings.velocitySpeed > 0)
+            velocity->insertMeta("licvdb_loop_speed", openvdb::DoubleMetadata(mSettings.velocitySpeed));
+        mStatic.push_back(velocity);
+    }
     if (mColorLeaves.enabled()) {
         auto color = mColorLeaves.release(mDomain, "color");
         color->insertMeta("licvdb_color_space", openvdb::StringMetadata("scene-linear Rec.709"));

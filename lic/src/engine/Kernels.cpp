@@ -28,6 +28,13 @@ double spotPeak(const LicSettings& settings, double radius)
     return peak;
 }
 
+double cometSpacing(const LicSettings& settings, double maxRadius)
+{
+    const int n = settings.halfSamples();
+    const double extent = double(settings.kernel == KernelType::Box ? 2 * n : n) * settings.step;
+    return extent + 4.0 * (maxRadius + 0.5);
+}
+
 namespace detail {
 
 void windowSums(KernelType kernel, double decay, int n, std::size_t N, int W, const double* vals, double* win,

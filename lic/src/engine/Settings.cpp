@@ -38,6 +38,10 @@ void LicSettings::validate() const
     if (brick != 0 && (brick < 8 || brick > 512 || brick % 8 != 0))
         fail("brick", brick, "a multiple of 8 in 8..512 output voxels (0 = automatic)");
     if (stride < 0 || stride > 64) fail("stride", stride, "0..64 samples per integration step (0 = automatic)");
+    if (comets < 0 || comets == 1 || comets > 10000) fail("comet frames", comets, "0 (none) or 2..10000");
+    if (comets > 0 && ripple) throw InputError("a loop has either ripple sums or comets, not both");
+    if (comets > 0 && engine != EngineType::Splat)
+        throw InputError("comet loops are made by the splat engine (spot input); other engines make ripple loops");
 }
 
 namespace detail {

@@ -14,6 +14,8 @@
 #include <limits>
 #include <array>
 #include <map>
+#include <cstring>
+#include <optional>
 
 namespace lic {
 
@@ -27,7 +29,8 @@ struct Window
     int lo, hi;        // sample offsets
     bool exp;
     double decay;
-    double weight(int i) const { return exp ? std::pow(decay, double(i)) : 1.0; }
+    std::vector<double> weights; // c^i for i = lo … hi (exp), else empty
+    double weight(int i) const { return exp ? weights[std::size_t(i - lo)] : 1.0; }
     double total() const
     {
         double t = 0;
@@ -55,7 +58,10 @@ Window windowOf(const LicSettings& s)
 {
     const int n = s.halfSamples();
     const bool exp = s.kernel == KernelType::Exp;
-    return {exp ? 0 : -n, n, exp, s.decay};
+    Window w{exp ? 0 : -n, n, exp, s.decay, {}};
+    if (exp)
+        for (int i = w.lo; i <= w.hi; ++i) w.weights.push_back(std::pow(s.decay, double(i)));
+    return w;
 }
 
 } // namespace
@@ -81,6 +87,7 @@ SplatTables::SplatTables(const std::vector<double>& radii, const LicSettings& se
     mNTau = int(std::ceil((mTauMax - mTauMin) / mDTau)) + 1;
     mND = int(std::ceil(mReach / mDD)) + 2;
     mTable.assign(std::size_t(mNTau) * std::size_t(mND) * std::size_t(mParts), 0.0f);
+    if (mExp) mWeights = win.weights; // i = 0 … n
     const double total = win.total();
     const double theta = detail::rippleStep(settings);
     tbb::parallel_for(0, mNTau, [&](int t) {
@@ -135,7 +142,7 @@ void SplatTables::addDirect(double tau, double d, float a, int i0, int i1, doubl
     i1 = std::min(i1, int(std::floor((mReach - tau) / mH)));
     for (int i = i0; i <= i1; ++i) {
         const double along = tau + double(i) * mH, r = std::sqrt(d * d + along * along);
-        const double w = (mExp ? std::pow(mDecay, double(i)) : 1.0) * double(a) / weight;
+        const double w = (mExp ? mWeights[std::size_t(i)] : 1.0) * double(a) / weight;
         for (int c = 0; c < mC; ++c) {
             double slope;
             const double f = spotProfile(r, mRadii[std::size_t(c)], slope);
@@ -147,6 +154,99 @@ void SplatTables::addDirect(double tau, double d, float a, int i0, int i1, doubl
             }
         }
     }
+}
+
+CometTables::CometTables(const SplatTables& still, const LicSettings& settings, double spacing)
+    : mN(settings.comets)
+    , mC(still.channels())
+    , mP(spacing)
+    , mTauMin(still.tauMin() - spacing)
+    , mTauMax(still.tauMax() + spacing)
+    , mReach(still.reach())
+    , mDTau(settings.step / 4.0)
+    , mDD(1.0 / 16.0)
+{
+    if (mN < 2) throw InputError("comet tables need at least 2 frames");
+    mNTau = int(std::ceil((mTauMax - mTauMin) / mDTau)) + 1;
+    mND = int(std::ceil(mReach / mDD)) + 2;
+    for (int g = 0; g < mN; ++g)
+        for (int m = 0; m < 2; ++m) mFade.push_back(fade(copyArc(g, m)));
+    const std::size_t row = std::size_t(mN) * std::size_t(mC);
+    mTable.assign(std::size_t(mNTau) * std::size_t(mND) * row, 0.0f);
+    tbb::parallel_for(0, mNTau, [&](int t) {
+        const double tau = mTauMin + double(t) * mDTau;
+        std::vector<float> parts(static_cast<std::size_t>(mC), 0.0f);
+        for (int di = 0; di < mND; ++di) {
+            const double d = double(di) * mDD;
+            float* out = &mTable[(std::size_t(t) * std::size_t(mND) + std::size_t(di)) * row];
+            for (int g = 0; g < mN; ++g) {
+                std::fill(parts.begin(), parts.end(), 0.0f);
+                for (int m = 0; m < 2; ++m) still.add(tau - copyArc(g, m), d, float(copyFade(g, m)), parts.data());
+                std::copy(parts.begin(), parts.end(), out + std::size_t(g) * std::size_t(mC));
+            }
+        }
+    });
+}
+
+double CometTables::fade(double a) const
+{
+    if (!(std::abs(a) < mP)) return 0.0;
+    const double c = std::cos(kPi * a / (2.0 * mP));
+    return c * c;
+}
+
+void CometTables::add(double tau, double d, float a, int phase, float* out) const
+{
+    if (!(tau >= mTauMin && tau <= mTauMax && d < mReach)) return;
+    const double ft = (tau - mTauMin) / mDTau, fd = d / mDD;
+    const int t0 = std::min(int(ft), mNTau - 2), d0 = std::min(int(fd), mND - 2);
+    const float wt = float(ft - t0), wd = float(fd - d0);
+    const std::size_t C = std::size_t(mC), P = std::size_t(mN) * C, row = std::size_t(mND) * P;
+    const float* c00 = &mTable[(std::size_t(t0) * std::size_t(mND) + std::size_t(d0)) * P];
+    const float* c01 = c00 + P;
+    const float* c10 = c00 + row;
+    const float* c11 = c10 + P;
+    const float w00 = a * (1 - wt) * (1 - wd), w01 = a * (1 - wt) * wd, w10 = a * wt * (1 - wd), w11 = a * wt * wd;
+    // Frame f shows phase g = (f + phase) mod N: walk the phases from `phase`, frames from 0.
+    std::size_t g = std::size_t(phase);
+    for (std::size_t f = 0; f < std::size_t(mN); ++f, g = (g + 1 == std::size_t(mN) ? 0 : g + 1)) {
+        const std::size_t o = g * C;
+        float* dst = out + f * C;
+        for (std::size_t c = 0; c < C; ++c)
+            dst[c] += w00 * c00[o + c] + w01 * c01[o + c] + w10 * c10[o + c] + w11 * c11[o + c];
+    }
+}
+
+void CometTables::addPhase(double tau, double d, float a, int phase, float* out) const
+{
+    if (!(tau >= mTauMin && tau <= mTauMax && d < mReach)) return;
+    const double ft = (tau - mTauMin) / mDTau, fd = d / mDD;
+    const int t0 = std::min(int(ft), mNTau - 2), d0 = std::min(int(fd), mND - 2);
+    const float wt = float(ft - t0), wd = float(fd - d0);
+    const std::size_t C = std::size_t(mC), P = std::size_t(mN) * C, row = std::size_t(mND) * P;
+    const float* c00 = &mTable[(std::size_t(t0) * std::size_t(mND) + std::size_t(d0)) * P + std::size_t(phase) * C];
+    const float* c01 = c00 + P;
+    const float* c10 = c00 + row;
+    const float* c11 = c10 + P;
+    const float w00 = a * (1 - wt) * (1 - wd), w01 = a * (1 - wt) * wd, w10 = a * wt * (1 - wd), w11 = a * wt * wd;
+    for (std::size_t c = 0; c < C; ++c) out[c] += w00 * c00[c] + w01 * c01[c] + w10 * c10[c] + w11 * c11[c];
+}
+
+int cometPhase(const openvdb::Vec3d& centre, int frames)
+{
+    // splitmix64 over the coordinates' bits.
+    std::uint64_t h = 0x9E3779B97F4A7C15ull;
+    for (int a = 0; a < 3; ++a) {
+        std::uint64_t bits = 0;
+        const double v = centre[a] + 0.0; // −0 and +0 alike
+        std::memcpy(&bits, &v, sizeof bits);
+        h ^= bits;
+        h += 0x9E3779B97F4A7C15ull;
+        h = (h ^ (h >> 30)) * 0xBF58476D1CE4E5B9ull;
+        h = (h ^ (h >> 27)) * 0x94D049BB133111EBull;
+        h ^= h >> 31;
+    }
+    return int(h % std::uint64_t(frames));
 }
 
 namespace {
@@ -161,6 +261,7 @@ struct SpotLine
     double endFwd = 1e300;   // … downstream, else +∞
     openvdb::Vec3f lo, hi;   // bounds of the samples
     openvdb::Vec3f tangent;  // unit flow direction at the spot (output index space)
+    int phase = 0;           // comet loops: the spot's phase (cometPhase)
 };
 
 /// Column-major 3×3 in output index units: G_j maps an offset from the line at sample j back to
@@ -265,6 +366,9 @@ public:
         , mReach(mTables.reach())
         , mRho(std::sqrt(mReach * mReach + slabHalf(mH) * slabHalf(mH)) + 0.25)
     {
+        if (settings.comets > 0)
+            mComets.emplace(mTables, settings,
+                            cometSpacing(settings, *std::max_element(channelRadii.begin(), channelRadii.end())));
     }
 
     /// 1. Trace every spot's streamline over the kernel's support (independent per spot).
@@ -283,7 +387,11 @@ private:
     void nearestPoints(const SpotLine& L, const Brick& brick, SplatScratch& sc) const;
     /// Add the spot's footprint at every voxel nearestPoints() found; returns the deposits.
     std::uint64_t depositSpot(const SpotLine& L, float weight, SplatScratch& sc) const;
+    /// Comet loops: every frame's footprint of the spot's comet train at voxel li.
+    void depositComets(const SpotLine& L, float weight, double tau, double d, SplatScratch& sc, std::size_t li) const;
     void handOver(const Brick& brick, SplatScratch& sc, const BrickSink& sink) const;
+    /// Clear the accumulators of voxel li's block the first time a spot reaches it.
+    void startBlock(std::size_t li, SplatScratch& sc) const;
 
     const VelocityField& mField;
     const OutputDomain& mDomain;
@@ -291,6 +399,7 @@ private:
     const SpotSet& mSpots;
     const LicSettings& mSettings;
     const SplatTables mTables;
+    std::optional<CometTables> mComets;
     const int mC, mK;
     const double mH;
     const Window mWin;
@@ -308,7 +417,9 @@ std::uint64_t SplatRun::traceLines()
 {
     const std::size_t n = mSpots.centers.size();
     mTrace = detail::traceSettings(mField, mDomain, mSettings);
-    mTrace.maxSamples = int(std::ceil((std::max(-mTables.tauMin(), mTables.tauMax()) + 1.0) / mH));
+    const double tauMin = mComets ? mComets->tauMin() : mTables.tauMin();
+    const double tauMax = mComets ? mComets->tauMax() : mTables.tauMax();
+    mTrace.maxSamples = int(std::ceil((std::max(-tauMin, tauMax) + 1.0) / mH));
     mStride = detail::integrationStride(mDomain, mSettings);
     std::vector<std::vector<openvdb::Vec3f>> linePts(n);
     std::vector<std::vector<Xform>> lineXf(n);
@@ -331,6 +442,7 @@ std::uint64_t SplatRun::traceLines()
             mTangents.push_back(tl > 0 ? t / tl : openvdb::Vec3f(0.0f));
         }
         samples += std::uint64_t(mLines[s].count);
+        if (mComets) mLines[s].phase = cometPhase(mSpots.centers[s], mComets->frames());
         std::vector<openvdb::Vec3f>().swap(linePts[s]);
         std::vector<Xform>().swap(lineXf[s]);
     }
@@ -486,9 +598,69 @@ void SplatRun::nearestPoints(const SpotLine& L, const Brick& brick, SplatScratch
     }
 }
 
-std::uint64_t SplatRun::depositSpot(const SpotLine& L, float weight, SplatScratch& sc) const
+void SplatRun::startBlock(std::size_t li, SplatScratch& sc) const
 {
     constexpr std::size_t V = OutputDomain::kBlockVoxels;
+    const std::size_t lb = li / V, K = std::size_t(mK);
+    if (sc.dirty[lb]) return;
+    sc.dirty[lb] = 1;
+    std::fill_n(sc.acc.begin() + std::ptrdiff_t(lb * V * K), V * K, 0.0f);
+    std::fill_n(sc.nearest.begin() + std::ptrdiff_t(lb * V), V, std::numeric_limits<float>::max());
+}
+
+void SplatRun::depositComets(const SpotLine& L, float weight, double tau, double d, SplatScratch& sc,
+                             std::size_t li) const
+{
+    const CometTables& ct = *mComets;
+    float* acc = &sc.acc[li * std::size_t(mK)];
+    // Lines that run on past every copy's support each way: one lookup gives every frame.
+    const double span = ct.spacing() + std::max(-mTables.tauMin(), mTables.tauMax()) + mH;
+    if (L.endBack < -span && L.endFwd > span) {
+        ct.add(tau, d, weight, L.phase, acc);
+        return;
+    }
+    // A line that ends at a wall or critical point within the train: copies beyond the end do not
+    // exist, those approaching it fade out over half a comet (so nothing pops), and the voxel's
+    // window is cut at the end as in a still (sums worked out directly).
+    const Window& win = mWin;
+    const double h = mH, ramp = 0.5 * double(win.hi - win.lo) * h + mReach; // half a comet
+    int i0 = win.lo, i1 = win.hi;
+    if (L.endBack > -1e299) i0 = std::max(i0, int(std::ceil((L.endBack - tau) / h - 1e-9)));
+    if (L.endFwd < 1e299) i1 = std::min(i1, int(std::floor((L.endFwd - tau) / h + 1e-9)));
+    if (i1 < i0) return;
+    double inside = 0;
+    for (int i = i0; i <= i1; ++i) inside += win.weight(i);
+    const int N = ct.frames(), C = mC;
+    const double reach = mReach;
+    const bool whole = i0 == win.lo && i1 == win.hi;
+    for (int f = 0; f < N; ++f) {
+        const int g = (f + L.phase) % N;
+        // Both copies clear of the ends (no fade, no cut): the phase's table entry.
+        const double clear = ramp + reach + h;
+        if (whole && std::min(L.endFwd - ct.copyArc(g, 0), ct.copyArc(g, 1) - L.endBack) >= clear) {
+            ct.addPhase(tau, d, weight, g, acc + std::size_t(f) * std::size_t(C));
+            continue;
+        }
+        for (int m = 0; m < 2; ++m) {
+            const double a = ct.copyArc(g, m), t = tau - a;
+            if (t < mTables.tauMin() || t > mTables.tauMax()) continue;
+            const double wall = std::clamp(std::min(L.endFwd - a, a - L.endBack) / ramp, 0.0, 1.0);
+            const double amp = ct.copyFade(g, m) * wall;
+            if (!(amp > 0)) continue;
+            std::fill(sc.parts.begin(), sc.parts.end(), 0.0f);
+            // As in a still: a copy within reach of the end is summed directly (part of it lies
+            // beyond), others from the table, renormalised to the window's samples inside.
+            if (L.endFwd - a < reach + h || a - L.endBack < reach + h)
+                mTables.addDirect(t, d, float(double(weight) * amp), i0, i1, inside, sc.parts.data());
+            else
+                mTables.add(t, d, float(double(weight) * amp * mWinTotal / inside), sc.parts.data());
+            for (int c = 0; c < C; ++c) acc[f * C + c] += sc.parts[std::size_t(c)];
+        }
+    }
+}
+
+std::uint64_t SplatRun::depositSpot(const SpotLine& L, float weight, SplatScratch& sc) const
+{
     const double reach = mReach, h = mH;
     const Window& win = mWin;
     const std::size_t K = std::size_t(mK);
@@ -511,7 +683,15 @@ std::uint64_t SplatRun::depositSpot(const SpotLine& L, float weight, SplatScratc
         const double along = d0.dot(t0);
         const double d = std::sqrt(std::max(0.0, d0.lengthSqr() - along * along));
         const double tau = double(sc.arc[li]) + along;
-        if (d >= reach || tau < mTables.tauMin() || tau > mTables.tauMax()) continue;
+        const double tauMin = mComets ? mComets->tauMin() : mTables.tauMin();
+        const double tauMax = mComets ? mComets->tauMax() : mTables.tauMax();
+        if (d >= reach || tau < tauMin || tau > tauMax) continue;
+        if (mComets) {
+            startBlock(li, sc);
+            depositComets(L, weight, tau, d, sc, li);
+            ++deposits;
+            continue;
+        }
         // x's window is cut where the spot's line ends at a wall: renormalise.
         int i0 = win.lo, i1 = win.hi;
         if (L.endBack > -1e299) i0 = std::max(i0, int(std::ceil((L.endBack - tau) / h - 1e-9)));
@@ -522,12 +702,7 @@ std::uint64_t SplatRun::depositSpot(const SpotLine& L, float weight, SplatScratc
             inside = 0;
             for (int i = i0; i <= i1; ++i) inside += win.weight(i);
         }
-        const std::size_t lb = li / V;
-        if (!sc.dirty[lb]) {
-            sc.dirty[lb] = 1;
-            std::fill_n(sc.acc.begin() + std::ptrdiff_t(lb * V * K), V * K, 0.0f);
-            std::fill_n(sc.nearest.begin() + std::ptrdiff_t(lb * V), V, std::numeric_limits<float>::max());
-        }
+        startBlock(li, sc);
         std::fill(sc.parts.begin(), sc.parts.end(), 0.0f);
         if (nearWall) mTables.addDirect(tau, d, weight, i0, i1, inside, sc.parts.data());
         else mTables.add(tau, d, float(double(weight) * mWinTotal / inside), sc.parts.data());
@@ -615,8 +790,10 @@ double splatSpotReach(const LicSettings& settings, double maxSpotRadius)
 {
     // The spot's own line runs n·h + R (+ a sample) each way, and deposits within √(R² + slab²)
     // of its coarse samples (SplatRun::nearestPoints).
+    // A comet loop's line runs on by the comet spacing each way.
     const double R = maxSpotRadius + 0.5, slab = slabHalf(settings.step);
-    return double(ghostMargin(settings)) + R + 1.0 + settings.step + std::sqrt(R * R + slab * slab) + 1.25;
+    const double train = settings.comets > 0 ? cometSpacing(settings, maxSpotRadius) : 0.0;
+    return double(ghostMargin(settings)) + train + R + 1.0 + settings.step + std::sqrt(R * R + slab * slab) + 1.25;
 }
 
 double splatFieldReach(const LicSettings& settings, bool, double maxSpotRadius, int stride)
@@ -625,7 +802,8 @@ double splatFieldReach(const LicSettings& settings, bool, double maxSpotRadius, 
     // from its centre, and the flow map carried along it needs derivatives: its whole line must
     // see the whole field's values, or its window would be cut elsewhere.
     const double integration = std::max({double(stride) * settings.step, 2.0, settings.step}) + 1.0;
-    return splatSpotReach(settings, maxSpotRadius) + double(ghostMargin(settings)) + maxSpotRadius + 0.5 +
+    const double train = settings.comets > 0 ? cometSpacing(settings, maxSpotRadius) : 0.0;
+    return splatSpotReach(settings, maxSpotRadius) + double(ghostMargin(settings)) + train + maxSpotRadius + 0.5 +
            settings.step + integration + 2.0;
 }
 

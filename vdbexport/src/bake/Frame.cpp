@@ -3,6 +3,7 @@
 #include "vdbexport/io/ColormapFile.h"
 
 #include "lic/engine/Engine.h"
+#include "lic/engine/Kernels.h"
 #include "lic/util/Error.h"
 
 #include <openvdb/openvdb.h>
@@ -78,11 +79,19 @@ Ranges bakeRanges(const Recipe& recipe, lic::ScalarSet& scalars, const lic::Outp
     return r;
 }
 
+double loopVoxelsPerFrame(const Plan& plan)
+{
+    const lic::LicSettings& s = plan.settings;
+    if (s.comets > 0) return lic::cometSpacing(s, plan.maxSpotRadius) / double(plan.frames);
+    return double(lic::detail::ripplePeriod(s)) * s.step / double(plan.frames);
+}
+
 lic::CompositeSettings compositeSettings(const Plan& plan, const Ranges& ranges)
 {
     const Recipe& r = plan.recipe;
     lic::CompositeSettings s;
     s.frames = plan.frames;
+    s.comets = plan.settings.comets > 0;
     s.spots = plan.spots;
     s.levels = plan.levels;
     s.linePeak = plan.linePeak;
@@ -94,6 +103,7 @@ lic::CompositeSettings compositeSettings(const Plan& plan, const Ranges& ranges)
     s.colorRange = ranges.color;
     s.writeInput = r.output.writeInput;
     s.writeTangent = r.output.writeTangent;
+    s.writeVelocity = r.output.writeVelocity;
     s.writeSeries = r.output.writeSeries;
     s.inputRadius = r.input.radii.empty() ? 1.0 : r.input.radii[0];
     s.haloScale = r.input.haloScale;
@@ -167,7 +177,15 @@ void FrameBake::makeTexture(const FrameOptions& options)
     });
     spotCount = mPlan.spots ? mJob.sumAll(input.spotCount, "making the input texture") : 0;
     mJob.stage("preparing the compositor", [&] {
-        compositor.emplace(compositeSettings(mPlan, ranges),
+        lic::CompositeSettings cs = compositeSettings(mPlan, ranges);
+        if (cs.writeVelocity && mPlan.frames > 1) {
+            // A loop's lines travel along the flow at one speed: output voxels per frame × voxel
+            // size × frames per second.
+            cs.velocitySpeed = loopVoxelsPerFrame(mPlan) * domain().voxelSize() * mPlan.recipe.field.fps;
+        } else if (cs.writeVelocity && options.velocityScale) {
+            cs.velocityScale = options.velocityScale(share);
+        }
+        compositor.emplace(std::move(cs),
                            compositeInputs(mPlan, *scalars, input, cmap ? &*cmap : nullptr), field(), domain(), layout());
     });
     seconds.input += since(t0);

@@ -54,6 +54,8 @@ struct FrameOptions
     /// Called once the field is read, before anything is computed from it (a sequence checks that
     /// its frames agree). May throw lic::InputError.
     std::function<void(const FieldShare&)> onField;
+    /// World units per second per unit of the field's velocity (a sequence's cache units); empty = 1.
+    std::function<double(const FieldShare&)> velocityScale;
 };
 
 /// One frame baked up to its composited grids (call compositor->frame(f) to get them). Not

@@ -102,7 +102,9 @@ Plan makePlan(const Recipe& recipe)
     s.brick = recipe.lic.brick;
     s.threads = recipe.threads;
     p.frames = recipe.animation.frames;
-    s.ripple = p.frames > 1;
+    // Spot loops of the splat engine carry travelling comets; every other loop the ripple sums.
+    if (p.frames > 1 && p.spots && s.engine == lic::EngineType::Splat) s.comets = p.frames;
+    else s.ripple = p.frames > 1;
     s.validate();
 
     p.roiPre = recipe.roi && recipe.roi->mode == "pre";
@@ -110,7 +112,7 @@ Plan makePlan(const Recipe& recipe)
     p.stretch = recipe.output.contrast == "stretch";
     p.levels = int(recipe.input.radii.size());
     p.textureChannels = p.spots ? 2 * p.levels : 1;
-    p.rawChannels = s.ripple ? 3 * p.textureChannels + 2 : p.textureChannels;
+    p.rawChannels = s.outputChannels(p.textureChannels);
     p.linePeak.assign(std::size_t(p.levels), 1.0);
     p.haloPeak.assign(std::size_t(p.levels), 1.0);
     if (p.spots && p.stretch) {

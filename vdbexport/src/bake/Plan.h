@@ -20,7 +20,7 @@ struct Plan
     bool stretch = true;    ///< contrast stretch (noise) / peak normalisation (spots)
     int levels = 1;         ///< spot radius levels K
     int textureChannels = 1;///< C: 1 for noise, 2K for spots (lines, then halos)
-    int rawChannels = 1;    ///< channels a brick delivers: C, or 3C + 2 for a loop (ripple sums)
+    int rawChannels = 1;    ///< channels a brick delivers: C, 3C + 2 for a ripple loop, frames · C for comets
     /// Spots: the peak a single spot gives on a straight line, per level (lines and halos), the
     /// normalisation that maps a line's core to 1 (1 without stretch).
     std::vector<double> linePeak, haloPeak;

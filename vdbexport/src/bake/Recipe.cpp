@@ -118,7 +118,7 @@ template <> struct Schema<OutputSpec>
         return std::make_tuple(field("path", &OutputSpec::path), field("upsample", &OutputSpec::upsample),
             field("write_input", &OutputSpec::writeInput), field("write_series", &OutputSpec::writeSeries),
             field("contrast", &OutputSpec::contrast), field("write_tangent", &OutputSpec::writeTangent),
-            field("half", &OutputSpec::half));
+            field("half", &OutputSpec::half), field("write_velocity", &OutputSpec::writeVelocity));
     }
 };
 template <> struct Schema<SurfaceSpec>

@@ -244,6 +244,9 @@ void bakeFrame(SequenceState& seq, int k, FrameProgress& progress)
         const double dt = worldPerSecond(*share.loaded.velocity, seq.velocityUnit) / recipe.field.fps;
         return seq.texture.next(k, dt, p, share, scalars);
     };
+    options.velocityScale = [&](const FieldShare& share) {
+        return worldPerSecond(*share.loaded.velocity, seq.velocityUnit);
+    };
     FrameBake fb(plan, Job::current(), progress, std::move(options));
     if (k == 0) seq.ranges = fb.ranges;
 

@@ -7,6 +7,7 @@
 // never a dense array over the volume.
 #pragma once
 
+#include "lic/composite/Animation.h"
 #include "lic/composite/Colormap.h"
 #include "lic/composite/Contrast.h"
 #include "lic/composite/LeafSet.h"
@@ -35,6 +36,9 @@ constexpr float kSparseEpsilon = 0.01f;
 struct CompositeSettings
 {
     int frames = 1;        ///< cyclic loop frames (1 = a still): the raw channels are ripple sums when > 1
+    /// A comet loop (spots, splat engine): the raw channels are every frame's, frame-major
+    /// (LicSettings::comets), instead of ripple sums.
+    bool comets = false;
     bool spots = false;    ///< spot input (lines and halos per width level), else noise
     int levels = 1;        ///< spot width levels K: texture channels 2K (lines, then halos)
     /// Spots: per level, the peak a single spot gives on a straight line (lines and halos): what
@@ -47,6 +51,13 @@ struct CompositeSettings
     std::array<double, 2> colorRange{0, 1}; ///< colour scalar mapped onto the colormap
     bool writeInput = false;   ///< grid `input`: the input texture
     bool writeTangent = false; ///< grid `tangent`: the unit flow direction
+    /// Grid `velocity`: how the lines move, world units per second, for renderers' motion blur.
+    bool writeVelocity = false;
+    /// With writeVelocity: > 0 = the unit flow direction times this speed (a loop: the speed at
+    /// which its comets or ripples travel); 0 = the field's own velocity times velocityScale (a
+    /// still, or one frame of an unsteady sequence).
+    double velocitySpeed = 0.0;
+    double velocityScale = 1.0;
     bool writeSeries = false;  ///< spots: grids density_w<k> / halo_w<k> for every level
     double inputRadius = 1.0;  ///< spots' `input` grid: the narrowest line radius (output voxels)
     double haloScale = 2.0;
@@ -54,8 +65,14 @@ struct CompositeSettings
 
     /// Texture channels C: 1 for noise, 2K for spots.
     int textureChannels() const { return spots ? 2 * levels : 1; }
-    /// Channels a brick delivers: C, or 3C + 2 for a loop (ripple sums).
-    int rawChannels() const { return frames > 1 ? 3 * textureChannels() + 2 : textureChannels(); }
+    /// Spot stills and comet loops compose their frames as the bricks arrive.
+    bool composesOnArrival() const { return spots && (frames == 1 || comets); }
+    /// Channels a brick delivers: C, 3C + 2 for a ripple loop, frames · C for a comet loop.
+    int rawChannels() const
+    {
+        if (frames > 1 && comets) return frames * textureChannels();
+        return frames > 1 ? 3 * textureChannels() + 2 : textureChannels();
+    }
 };
 
 /// The scalars and textures compositing reads; empty ScalarFields are unused.
@@ -106,8 +123,8 @@ private:
     template<typename Raw>
     SpotVoxel composeSpots(const Raw& raw, float widthT, float roi) const;
     void consumeBlock(const BrickChannels& bc, std::size_t i, Moments& moments);
-    /// Whether a spot voxel is kept (line or halo shows in some frame); a still's final values are
-    /// stored here.
+    /// Whether a spot voxel is kept (line or halo shows in some frame); a still's and a comet
+    /// loop's final values are stored here.
     template<typename Raw>
     bool keepSpotVoxel(const Raw& raw, float widthT, float roi, std::size_t b, const openvdb::Coord& origin,
                        openvdb::Index off);
@@ -128,10 +145,17 @@ private:
     // Per-voxel data kept until the frames are written.
     std::vector<LeafSet<openvdb::FloatGrid>> mRawLeaves;  // loops and noise: the brick's channels
     LeafSet<openvdb::FloatGrid> mWidthLeaves, mRoiLeaves;  // loops: width blend t, ROI post-mask
-    LeafSet<openvdb::FloatGrid> mDensity, mHalo;           // spot stills: final
-    std::vector<LeafSet<openvdb::FloatGrid>> mLines, mHalos; // spot stills with writeSeries
+    /// Spot stills and comet loops: each frame's final values (lines and halos per level with
+    /// writeSeries), composed as the bricks arrive.
+    struct SpotFrame
+    {
+        LeafSet<openvdb::FloatGrid> density, halo;
+        std::vector<LeafSet<openvdb::FloatGrid>> lines, halos;
+    };
+    std::vector<SpotFrame> mSpotFrames;
     LeafSet<openvdb::FloatGrid> mInputLeaves, mScalarLeaves;
-    LeafSet<openvdb::Vec3SGrid> mTangentLeaves, mColorLeaves;
+    LeafSet<openvdb::Vec3SGrid> mTangentLeaves, mVelocityLeaves, mColorLeaves;
+    std::vector<FramePhase> mPhases; // a loop's frames 1 … N (ripple phases)
     openvdb::GridPtrVec mStatic;
     bool mStaticBuilt = false;
 

@@ -15,6 +15,12 @@ namespace lic {
 /// tried): the normalisation that maps a line's core to 1.
 double spotPeak(const LicSettings& settings, double radius);
 
+/// Comet loops (LicSettings::comets): the spacing P of the comets along a spot's streamline, in
+/// output voxels: the kernel's extent (box 2·n·h, exp n·h) plus four times the reach of the widest
+/// footprint `maxRadius` (a halo's radius), so that consecutive comets, halos included, stand apart
+/// with a gap about their own width. Each comet moves P / frames output voxels per frame.
+double cometSpacing(const LicSettings& settings, double maxRadius);
+
 namespace detail {
 
 /// Ripple period in samples (cyclic animation): one ripple per kernel window, the 2n+1 samples of

@@ -48,6 +48,10 @@ struct LicSettings
     /// Also produce the ripple sums a cyclic animation is composed from (either kernel; see
     /// composite/Animation.h). The result then has 3·C + 2 channels.
     bool ripple = false;
+    /// Spot loops of the splat engine: this many frames of travelling comets (0 = none; see
+    /// engine/Splat.h CometTables and docs/technique.md §8). The result then has comets · C channels,
+    /// frame-major (frame f's channel c at f·C + c). Excludes `ripple`.
+    int comets = 0;
     double length = 20.0;    ///< kernel half-length, one direction (> 0)
     double step = 0.5;       ///< arc length between samples (> 0, ≤ length)
     double tolerance = 1e-3; ///< RK45 local error per step
@@ -68,8 +72,13 @@ struct LicSettings
 
     /// Samples per direction of the kernel: round(length / step), at least 1.
     int halfSamples() const;
-    /// Output channels for a texture of C channels: C, or 3·C + 2 with the ripple sums.
-    int outputChannels(int textureChannels) const { return ripple ? 3 * textureChannels + 2 : textureChannels; }
+    /// Output channels for a texture of C channels: C, 3·C + 2 with the ripple sums, comets · C
+    /// for a comet loop.
+    int outputChannels(int textureChannels) const
+    {
+        if (comets > 0) return comets * textureChannels;
+        return ripple ? 3 * textureChannels + 2 : textureChannels;
+    }
     /// @throw lic::InputError naming the first out-of-range parameter.
     void validate() const;
 };

@@ -62,8 +62,51 @@ private:
     double mReach, mTauMin, mTauMax;
     double mDTau, mDD;
     int mNTau, mND;
+    std::vector<double> mWeights; // exp: c^i, i = 0 … n
     std::vector<float> mTable; // [tau][d][part]
 };
+
+/// Comet loops (LicSettings::comets = N frames): every spot's streamline carries a train of
+/// comets, copies of the spot at arcs a spaced P apart (cometSpacing()), moving P/N downstream per
+/// frame, so frame N+1 is frame 1. A copy at arc a has amplitude fade(a) = cos²(πa / 2P) for
+/// |a| < P, else 0: at every phase the two copies inside (−P, P) sum to the spot's own weight
+/// (cos² + sin² = 1), so a line carries the same ink in every frame, and comets fade in upstream
+/// and out downstream instead of popping. Each copy's footprint is the still's W(τ − a, d), so a
+/// comet has the kernel's shape (box: a dash; exp: the tapered streamlet, head downstream).
+/// Tabulated per phase g = 0 … N−1 (copies at (g/N − m)·P, m = 0, 1) from the still's tables, so
+/// a voxel reads every frame from one bilinear lookup; a spot of phase k shows phase (f + k) mod N
+/// in frame f (phases spread the comets of neighbouring lines).
+class CometTables
+{
+public:
+    CometTables(const SplatTables& still, const LicSettings& settings, double spacing);
+
+    int frames() const { return mN; }
+    double spacing() const { return mP; }
+    /// Amplitude of a copy at arc a (0 for |a| ≥ P).
+    double fade(double a) const;
+    /// Arc of copy m (0 or 1) at phase g.
+    double copyArc(int g, int m) const { return (double(g) / double(mN) - double(m)) * mP; }
+    /// fade(copyArc(g, m)), precomputed.
+    double copyFade(int g, int m) const { return mFade[std::size_t(2 * g + m)]; }
+    double tauMin() const { return mTauMin; }
+    double tauMax() const { return mTauMax; }
+    /// Add a·(every frame's W) at (τ, d) to out[f·C + c], frame f showing phase (f + phase) mod N.
+    void add(double tau, double d, float a, int phase, float* out) const;
+    /// Add a·(phase g's W) at (τ, d) to out[0 .. C).
+    void addPhase(double tau, double d, float a, int g, float* out) const;
+
+private:
+    int mN, mC;
+    double mP, mTauMin, mTauMax, mReach, mDTau, mDD;
+    int mNTau, mND;
+    std::vector<double> mFade; // [phase][copy]
+    std::vector<float> mTable; // [tau][d][phase][channel]
+};
+
+/// A spot's comet phase for N frames: a hash of its centre, so it does not depend on the order or
+/// the subset of spots a process holds.
+int cometPhase(const openvdb::Vec3d& centre, int frames);
 
 /// The splat engine's entry in the engine table: the same channels a gather engine delivers for
 /// spots (2K, or 3·2K + 2 for a loop), brick by brick, only for bricks some spot's footprint

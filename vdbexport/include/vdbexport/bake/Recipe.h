@@ -69,6 +69,9 @@ struct OutputSpec
     bool writeSeries = false;    ///< `write_series`: also write `density_w<k>` / `halo_w<k>`
     std::string contrast = "stretch"; ///< `contrast`: "stretch" | "none"
     bool writeTangent = false;   ///< `write_tangent`: also write the `tangent` vec3s grid
+    /// `write_velocity`: also write the `velocity` vec3s grid (world units per second: the flow
+    /// for a still or a sequence frame, the comets' or ripples' travel for a loop at field.fps)
+    bool writeVelocity = false;
     /// `half`: store float and vec3s grids as 16-bit halves on disk (about half the file;
     /// readers get float grids back, to ~5e-4 relative)
     bool half = false;
