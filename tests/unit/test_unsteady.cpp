@@ -12,6 +12,9 @@
 #include "lic/util/Error.h"
 #include "lic/field/Presets.h"
 #include "lic/texture/Advection.h"
+#include "lic/field/Field.h"
+
+#include <openvdb/io/File.h>
 
 #include "ManifestDigests.h"
 #include "TestFields.h"
@@ -376,4 +379,36 @@ TEST_F(Unsteady, BadSequencesAreRefusedAndWriteNothing)
     loop.animation.frames = 4;
     loop.field.frames = std::array<int, 2>{1, 2};
     refuse(loop, "animation.frames");
+}
+
+TEST_F(Unsteady, VelocityGridIsEachFramesOwnFlow)
+{
+    // --write-velocity on a sequence: frame n's `velocity` grid is frame n's flow (world units per
+    // second), not frame 1's: the moving tornado's frames 2 and 7 differ, each matching its own field.
+    auto r = tornado("vel.vdb", "spots");
+    r.output.writeVelocity = true;
+    r.field.frames = std::array<int, 2>{2, 7};
+    vdbexport::bake(r);
+    double differ = 0;
+    std::size_t n = 0;
+    for (int frame : {2, 7}) {
+        openvdb::io::File file((sDir / ("vel_000" + std::to_string(frame) + ".vdb")).string());
+        file.open();
+        const auto v = openvdb::gridPtrCast<openvdb::Vec3SGrid>(file.readGrid("velocity"));
+        file.close();
+        ASSERT_TRUE(v) << "frame " << frame;
+        const lic::VelocityField own(lic::makePresetField("tornado", openvdb::Coord(40), double(frame) / 24.0).velocity);
+        const lic::VelocityField other(lic::makePresetField("tornado", openvdb::Coord(40), double(9 - frame) / 24.0).velocity);
+        for (auto it = v->cbeginValueOn(); it; ++it) {
+            openvdb::Vec3d a, b;
+            const openvdb::Vec3d w = v->indexToWorld(it.getCoord());
+            ASSERT_TRUE(own.sample(w, a));
+            ASSERT_TRUE(other.sample(w, b));
+            ASSERT_LE((openvdb::Vec3d(*it) - a).length(), 1e-5 * (1.0 + a.length())) << "frame " << frame;
+            differ += (a - b).length();
+            ++n;
+        }
+    }
+    ASSERT_GT(n, 1000u);
+    EXPECT_GT(differ / double(n), 1e-3) << "frames 2 and 7 of the tornado should move differently";
 }
