@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <functional>
+#include <vector>
 
 namespace lictest {
 
@@ -55,6 +56,16 @@ inline openvdb::Vec3SGrid::Ptr abcField(int n = 32)
                               B * std::sin(p[0]) + A * std::cos(p[2]),
                               C * std::sin(p[1]) + B * std::cos(p[0]));
     });
+}
+
+/// Mean of a slot-indexed volume over a domain's active slots (lic::OutputDomain).
+template<typename Domain>
+double meanOverActive(const Domain& d, const std::vector<float>& v)
+{
+    double s = 0, n = 0;
+    for (std::size_t i = 0; i < v.size(); ++i)
+        if (d.isActive(i)) s += v[i], n += 1;
+    return s / n;
 }
 
 } // namespace lictest

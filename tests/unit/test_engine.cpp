@@ -326,16 +326,6 @@ TEST(ExpKernel, StreakTrailsUpstreamWithTheBrightHeadDownstream)
 
 // ---- cyclic animation (ripple kernel) ----------------------------------------------------------
 
-namespace {
-double meanOver(const OutputDomain& d, const std::vector<float>& v)
-{
-    double s = 0, n = 0;
-    for (std::size_t i = 0; i < v.size(); ++i)
-        if (d.isActive(i)) s += v[i], n += 1;
-    return s / n;
-}
-} // namespace
-
 TEST(Animation, LoopIsSeamlessSteadyAndMovesDownstream)
 {
     VelocityField field(lictest::uniformField(21)); // flow along +x
@@ -373,7 +363,7 @@ TEST(Animation, LoopIsSeamlessSteadyAndMovesDownstream)
         // fluctuation relative to the frames' spread around it).
         double lo = 1e9, hi = -1e9;
         for (int f = 0; f < N; ++f) {
-            const double m = meanOver(domain, frames[f]);
+            const double m = lictest::meanOverActive(domain, frames[f]);
             lo = std::min(lo, m), hi = std::max(hi, m);
         }
         EXPECT_LT((hi - lo) / lo, 0.05) << toString(e);

@@ -286,13 +286,6 @@ double bestShift(const VelocityField& field, const OutputDomain& d, const std::v
     return best;
 }
 
-double meanOver(const OutputDomain& d, const std::vector<float>& v)
-{
-    double s = 0, n = 0;
-    for (std::size_t i = 0; i < v.size(); ++i)
-        if (d.isActive(i)) s += v[i], n += 1;
-    return s / n;
-}
 
 } // namespace
 
@@ -317,7 +310,7 @@ TEST(SplatComets, TravelDownstreamAtOnePaceAndLoop)
             ASSERT_EQ(r.channels.size(), std::size_t(2 * N)); // lines and halos per frame
             const double expect = cometSpacing(s, 2.0) / double(N);
             std::vector<double> means;
-            for (int f = 0; f < N; ++f) means.push_back(meanOver(domain, r.channels[std::size_t(2 * f)]));
+            for (int f = 0; f < N; ++f) means.push_back(lictest::meanOverActive(domain, r.channels[std::size_t(2 * f)]));
             double avg = 0;
             for (double m : means) avg += m / double(N);
             for (int f = 0; f < N; ++f) {

@@ -195,41 +195,44 @@ double CometTables::fade(double a) const
     return c * c;
 }
 
-void CometTables::add(double tau, double d, float a, int phase, float* out) const
+CometTables::Corners CometTables::corners(double tau, double d, float a) const
 {
-    if (!(tau >= mTauMin && tau <= mTauMax && d < mReach)) return;
+    Corners c;
+    if (!(tau >= mTauMin && tau <= mTauMax && d < mReach)) return c;
     const double ft = (tau - mTauMin) / mDTau, fd = d / mDD;
     const int t0 = std::min(int(ft), mNTau - 2), d0 = std::min(int(fd), mND - 2);
     const float wt = float(ft - t0), wd = float(fd - d0);
-    const std::size_t C = std::size_t(mC), P = std::size_t(mN) * C, row = std::size_t(mND) * P;
-    const float* c00 = &mTable[(std::size_t(t0) * std::size_t(mND) + std::size_t(d0)) * P];
-    const float* c01 = c00 + P;
-    const float* c10 = c00 + row;
-    const float* c11 = c10 + P;
-    const float w00 = a * (1 - wt) * (1 - wd), w01 = a * (1 - wt) * wd, w10 = a * wt * (1 - wd), w11 = a * wt * wd;
+    const std::size_t P = std::size_t(mN) * std::size_t(mC), row = std::size_t(mND) * P;
+    c.p[0] = &mTable[(std::size_t(t0) * std::size_t(mND) + std::size_t(d0)) * P];
+    c.p[1] = c.p[0] + P;
+    c.p[2] = c.p[0] + row;
+    c.p[3] = c.p[2] + P;
+    c.w = {a * (1 - wt) * (1 - wd), a * (1 - wt) * wd, a * wt * (1 - wd), a * wt * wd};
+    return c;
+}
+
+void CometTables::add(double tau, double d, float a, int phase, float* out) const
+{
+    const Corners k = corners(tau, d, a);
+    if (!k.p[0]) return;
     // Frame f shows phase g = (f + phase) mod N: walk the phases from `phase`, frames from 0.
+    const std::size_t C = std::size_t(mC);
     std::size_t g = std::size_t(phase);
     for (std::size_t f = 0; f < std::size_t(mN); ++f, g = (g + 1 == std::size_t(mN) ? 0 : g + 1)) {
         const std::size_t o = g * C;
         float* dst = out + f * C;
         for (std::size_t c = 0; c < C; ++c)
-            dst[c] += w00 * c00[o + c] + w01 * c01[o + c] + w10 * c10[o + c] + w11 * c11[o + c];
+            dst[c] += k.w[0] * k.p[0][o + c] + k.w[1] * k.p[1][o + c] + k.w[2] * k.p[2][o + c] + k.w[3] * k.p[3][o + c];
     }
 }
 
-void CometTables::addPhase(double tau, double d, float a, int phase, float* out) const
+void CometTables::addPhase(double tau, double d, float a, int g, float* out) const
 {
-    if (!(tau >= mTauMin && tau <= mTauMax && d < mReach)) return;
-    const double ft = (tau - mTauMin) / mDTau, fd = d / mDD;
-    const int t0 = std::min(int(ft), mNTau - 2), d0 = std::min(int(fd), mND - 2);
-    const float wt = float(ft - t0), wd = float(fd - d0);
-    const std::size_t C = std::size_t(mC), P = std::size_t(mN) * C, row = std::size_t(mND) * P;
-    const float* c00 = &mTable[(std::size_t(t0) * std::size_t(mND) + std::size_t(d0)) * P + std::size_t(phase) * C];
-    const float* c01 = c00 + P;
-    const float* c10 = c00 + row;
-    const float* c11 = c10 + P;
-    const float w00 = a * (1 - wt) * (1 - wd), w01 = a * (1 - wt) * wd, w10 = a * wt * (1 - wd), w11 = a * wt * wd;
-    for (std::size_t c = 0; c < C; ++c) out[c] += w00 * c00[c] + w01 * c01[c] + w10 * c10[c] + w11 * c11[c];
+    const Corners k = corners(tau, d, a);
+    if (!k.p[0]) return;
+    const std::size_t C = std::size_t(mC), o = std::size_t(g) * C;
+    for (std::size_t c = 0; c < C; ++c)
+        out[c] += k.w[0] * k.p[0][o + c] + k.w[1] * k.p[1][o + c] + k.w[2] * k.p[2][o + c] + k.w[3] * k.p[3][o + c];
 }
 
 int cometPhase(const openvdb::Vec3d& centre, int frames)

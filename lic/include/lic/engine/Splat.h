@@ -27,6 +27,7 @@
 #include "lic/engine/Settings.h"
 #include "lic/texture/Spots.h"
 
+#include <array>
 #include <vector>
 
 namespace lic {
@@ -97,6 +98,14 @@ public:
     void addPhase(double tau, double d, float a, int g, float* out) const;
 
 private:
+    /// The four table rows around (τ, d) and their bilinear weights times a (p[0] null outside).
+    struct Corners
+    {
+        std::array<const float*, 4> p{};
+        std::array<float, 4> w{};
+    };
+    Corners corners(double tau, double d, float a) const;
+
     int mN, mC;
     double mP, mTauMin, mTauMax, mReach, mDTau, mDD;
     int mNTau, mND;
