@@ -1,6 +1,7 @@
 #include "lic/engine/Splat.h"
 
 #include "lic/engine/Kernels.h"
+#include "lic/texture/Noise.h"
 
 #include "lic/util/Error.h"
 #include "lic/util/Parallel.h"
@@ -14,7 +15,6 @@
 #include <limits>
 #include <array>
 #include <map>
-#include <cstring>
 #include <optional>
 
 namespace lic {
@@ -237,19 +237,10 @@ void CometTables::addPhase(double tau, double d, float a, int g, float* out) con
 
 int cometPhase(const openvdb::Vec3d& centre, int frames)
 {
-    // splitmix64 over the coordinates' bits.
-    std::uint64_t h = 0x9E3779B97F4A7C15ull;
-    for (int a = 0; a < 3; ++a) {
-        std::uint64_t bits = 0;
-        const double v = centre[a] + 0.0; // −0 and +0 alike
-        std::memcpy(&bits, &v, sizeof bits);
-        h ^= bits;
-        h += 0x9E3779B97F4A7C15ull;
-        h = (h ^ (h >> 30)) * 0xBF58476D1CE4E5B9ull;
-        h = (h ^ (h >> 27)) * 0x94D049BB133111EBull;
-        h ^= h >> 31;
-    }
-    return int(h % std::uint64_t(frames));
+    // The noise's coordinate hash over the centre to 1/256 voxel (distinct spots are ≥ 0.88·d apart).
+    constexpr std::uint64_t kCometSeed = 0x636f6d6574ull; // "comet"
+    auto q = [&](int a) { return int(std::lround(centre[a] * 256.0)); };
+    return int(hashCoord(kCometSeed, q(0), q(1), q(2)) % std::uint64_t(frames));
 }
 
 namespace {
@@ -372,6 +363,8 @@ public:
         if (settings.comets > 0)
             mComets.emplace(mTables, settings,
                             cometSpacing(settings, *std::max_element(channelRadii.begin(), channelRadii.end())));
+        mTauMin = mComets ? mComets->tauMin() : mTables.tauMin();
+        mTauMax = mComets ? mComets->tauMax() : mTables.tauMax();
     }
 
     /// 1. Trace every spot's streamline over the kernel's support (independent per spot).
@@ -403,6 +396,7 @@ private:
     const LicSettings& mSettings;
     const SplatTables mTables;
     std::optional<CometTables> mComets;
+    double mTauMin = 0, mTauMax = 0; // arcs from the spot a voxel's foot point can have and count
     const int mC, mK;
     const double mH;
     const Window mWin;
@@ -420,9 +414,7 @@ std::uint64_t SplatRun::traceLines()
 {
     const std::size_t n = mSpots.centers.size();
     mTrace = detail::traceSettings(mField, mDomain, mSettings);
-    const double tauMin = mComets ? mComets->tauMin() : mTables.tauMin();
-    const double tauMax = mComets ? mComets->tauMax() : mTables.tauMax();
-    mTrace.maxSamples = int(std::ceil((std::max(-tauMin, tauMax) + 1.0) / mH));
+    mTrace.maxSamples = int(std::ceil((std::max(-mTauMin, mTauMax) + 1.0) / mH));
     mStride = detail::integrationStride(mDomain, mSettings);
     std::vector<std::vector<openvdb::Vec3f>> linePts(n);
     std::vector<std::vector<Xform>> lineXf(n);
@@ -634,12 +626,11 @@ void SplatRun::depositComets(const SpotLine& L, float weight, double tau, double
     double inside = 0;
     for (int i = i0; i <= i1; ++i) inside += win.weight(i);
     const int N = ct.frames(), C = mC;
-    const double reach = mReach;
+    const double reach = mReach, clear = ramp + reach + h;
     const bool whole = i0 == win.lo && i1 == win.hi;
     for (int f = 0; f < N; ++f) {
         const int g = (f + L.phase) % N;
         // Both copies clear of the ends (no fade, no cut): the phase's table entry.
-        const double clear = ramp + reach + h;
         if (whole && std::min(L.endFwd - ct.copyArc(g, 0), ct.copyArc(g, 1) - L.endBack) >= clear) {
             ct.addPhase(tau, d, weight, g, acc + std::size_t(f) * std::size_t(C));
             continue;
@@ -686,9 +677,7 @@ std::uint64_t SplatRun::depositSpot(const SpotLine& L, float weight, SplatScratc
         const double along = d0.dot(t0);
         const double d = std::sqrt(std::max(0.0, d0.lengthSqr() - along * along));
         const double tau = double(sc.arc[li]) + along;
-        const double tauMin = mComets ? mComets->tauMin() : mTables.tauMin();
-        const double tauMax = mComets ? mComets->tauMax() : mTables.tauMax();
-        if (d >= reach || tau < tauMin || tau > tauMax) continue;
+        if (d >= reach || tau < mTauMin || tau > mTauMax) continue;
         if (mComets) {
             startBlock(li, sc);
             depositComets(L, weight, tau, d, sc, li);

@@ -84,8 +84,6 @@ public:
 
     int frames() const { return mN; }
     double spacing() const { return mP; }
-    /// Amplitude of a copy at arc a (0 for |a| ≥ P).
-    double fade(double a) const;
     /// Arc of copy m (0 or 1) at phase g.
     double copyArc(int g, int m) const { return (double(g) / double(mN) - double(m)) * mP; }
     /// fade(copyArc(g, m)), precomputed.
@@ -105,6 +103,8 @@ private:
         std::array<float, 4> w{};
     };
     Corners corners(double tau, double d, float a) const;
+    /// Amplitude of a copy at arc a (0 for |a| ≥ P).
+    double fade(double a) const;
 
     int mN, mC;
     double mP, mTauMin, mTauMax, mReach, mDTau, mDD;
