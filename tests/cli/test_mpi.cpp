@@ -6,7 +6,9 @@
 // NaN only one rank reads), a killed rank (while convolving, and while rank 0 writes a loop),
 // a failing write on rank 0 — each ends the job with one clear message, a non-zero exit code and
 // no file, temporary or not; a corrupt .vdb refused on every rank by the read checks. Splat and
-// gather spots from parts of a long field. Fields are small (48×48×72 outputs in 16³ bricks).
+// gather spots from parts of a long field. Unsteady sequences (8 frames of a moving tornado, noise
+// and spots) identical to one process in every frame, a rank killed mid-sequence and a failed
+// write leaving nothing. Fields are small (48×48×72 and 80³ outputs in 16³ bricks).
 #include <gtest/gtest.h>
 
 #include "CliRun.h"
@@ -54,6 +56,11 @@ protected:
         // A long field, so that a rank's part (its bricks ± the margin) is less than the whole.
         const lic::PresetField abc = lic::makePresetField("abc", openvdb::Coord(16, 16, 96));
         vdbexport::writeVdbAtomic((sDir / "long.vdb").string(), {abc.velocity});
+        // A moving field: 8 frames of the tornado (frame n at time n/24).
+        for (int n = 1; n <= 8; ++n) {
+            const lic::PresetField t = lic::makePresetField("tornado", openvdb::Coord(40), double(n) / 24.0);
+            vdbexport::writeVdbAtomic((sDir / ("t_000" + std::to_string(n) + ".vdb")).string(), {t.velocity});
+        }
     }
     static void TearDownTestSuite() { fs::remove_all(sDir); }
 
@@ -191,6 +198,16 @@ json manifestCore(const fs::path& p)
 const std::vector<std::string> kNoise = {"--field", "", "--brick", "16", "--length", "8", "--color", "vorticity",
                                          "--write-tangent", "--write-input", "--roi", "speed", "--roi-range", "0.3,5",
                                          "--quiet", "--json"};
+
+/// An unsteady sequence over the 8 tornado frames (`input`: noise or spots).
+std::vector<std::string> sequenceArgs(const fs::path& dir, const std::string& input)
+{
+    std::vector<std::string> a = {"--field", (dir / "t_####.vdb").string(), "--field-frames", "1,8", "--input", input,
+                                  "--brick", "16", "--length", "8", "--quiet", "--json"};
+    if (input == "spots") a.insert(a.end(), {"--spacing", "6", "--halo-scale", "2.5", "--color", "speed"});
+    else a.insert(a.end(), {"--color", "vorticity", "--write-input"});
+    return a;
+}
 
 std::vector<std::string> withField(std::vector<std::string> args, const std::string& field)
 {
@@ -410,5 +427,62 @@ TEST_F(MpiBake, AFieldMissingOnEveryRankIsOneMessage)
 {
     const RunResult r = bake(3, "out.vdb", withField(kNoise, (sDir / "missing.vdb").string()));
     expectCleanFailure(r, 2, "missing.vdb");
+    EXPECT_EQ(r.err.find("licvdb bake: error"), r.err.rfind("licvdb bake: error")) << r.describe();
+}
+
+TEST_F(MpiBake, AnUnsteadySequenceOfNoiseIsIdenticalToOneProcessInEveryFrame)
+{
+    // The carried noise is held in parts: each rank keeps the blocks its bricks read and receives
+    // the previous frame's margin blocks from their owners.
+    RunResult r1, r3;
+    bakeOneAndThree(sequenceArgs(sDir, "noise"), r1, r3, "one.vdb", "three.vdb");
+    expectSameFrames(mOut, "one", "three", 8, "noise sequence");
+    const json s1 = json::parse(r1.out), s3 = json::parse(r3.out);
+    ASSERT_EQ(s3["per_frame"].size(), 8u) << r3.out;
+    for (std::size_t f = 0; f < 8; ++f) {
+        EXPECT_EQ(s3["per_frame"][f]["texture"], s1["per_frame"][f]["texture"]) << "frame " << f + 1;
+        EXPECT_EQ(s3["per_frame"][f]["raw_mean"], s1["per_frame"][f]["raw_mean"]) << "frame " << f + 1;
+    }
+    // The noise moved (frames 2–8 carry most voxels from the previous frame) ...
+    EXPECT_GT(s1["per_frame"][4]["texture"]["carried"].get<double>(), 0.5 * s1["per_frame"][4]["texture"]["voxels"].get<double>());
+    // ... each rank held a part of it, and the margins travelled.
+    ASSERT_EQ(s3["ranks"].size(), 3u) << r3.out;
+    const std::uint64_t blocks = s1["per_frame"][0]["output_voxels"].get<std::uint64_t>() / 512; // a full cube
+    ASSERT_EQ(blocks, 1000u); // 80³ output voxels in 8³ blocks
+    std::uint64_t received = 0;
+    for (const json& rank : s3["ranks"]) {
+        EXPECT_LT(rank["texture_blocks_held"].get<std::uint64_t>(), blocks) << r3.out;
+        received += rank["texture_bytes_received"].get<std::uint64_t>();
+    }
+    EXPECT_GT(received, 0u) << r3.out;
+    EXPECT_EQ(manifestCore(mOut / "three.licvdb.json"), manifestCore(mOut / "one.licvdb.json"));
+}
+
+TEST_F(MpiBake, AnUnsteadySequenceOfSpotsIsIdenticalToOneProcessInEveryFrame)
+{
+    RunResult r1, r3;
+    bakeOneAndThree(sequenceArgs(sDir, "spots"), r1, r3, "one.vdb", "three.vdb");
+    expectSameFrames(mOut, "one", "three", 8, "spot sequence");
+    const json s1 = json::parse(r1.out), s3 = json::parse(r3.out);
+    for (std::size_t f = 0; f < 8; ++f)
+        EXPECT_EQ(s3["per_frame"][f]["texture"], s1["per_frame"][f]["texture"]) << "frame " << f + 1;
+    EXPECT_GT(s1["per_frame"][7]["texture"]["born"].get<int>() + s1["per_frame"][7]["texture"]["left"].get<int>(), 0)
+        << "the flock should change over the tornado's frames";
+    EXPECT_EQ(manifestCore(mOut / "three.licvdb.json"), manifestCore(mOut / "one.licvdb.json"));
+}
+
+TEST_F(MpiBake, ARankKilledMidSequenceLeavesNoFrame)
+{
+    // Rank 0 has staged frames 1 … 4 when rank 1 dies composing frame 5.
+    const RunResult r = bake(3, "seq.vdb", sequenceArgs(sDir, "noise"), "LICVDB_TEST_FAULT=1:composing frame 5:kill");
+    EXPECT_NE(r.code, 0) << r.describe();
+    EXPECT_TRUE(files().empty()) << "left behind: " << (files().empty() ? "" : *files().begin()) << "\n" << r.describe();
+}
+
+TEST_F(MpiBake, AFailureMidSequenceIsOneMessageAndNoFrame)
+{
+    // Rank 0 fails to stage frame 3 of a spot sequence: every rank leaves, frames 1 and 2 unseen.
+    const RunResult r = bake(3, "seq.vdb", sequenceArgs(sDir, "spots"), "LICVDB_TEST_FAULT=0:writing frame 3:error");
+    expectCleanFailure(r, 1, "rank 0 of 3 failed while writing: injected test fault");
     EXPECT_EQ(r.err.find("licvdb bake: error"), r.err.rfind("licvdb bake: error")) << r.describe();
 }

@@ -7,6 +7,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <string>
 #include <unordered_map>
 
 namespace lic {
@@ -85,88 +87,251 @@ private:
 
 // ---- AdvectedNoise -----------------------------------------------------------------------------
 
-void AdvectedNoise::start(const OutputDomain& domain)
+namespace {
+
+std::vector<std::uint32_t> allBlocks(const OutputDomain& domain)
 {
-    mDomain = std::make_unique<OutputDomain>(domain);
-    mGeneration = 0;
-    mX.assign(domain.slotCount(), openvdb::Vec3f(0.0f));
-    mGen.assign(domain.slotCount(), 0);
-    tbb::parallel_for(std::size_t(0), domain.slotCount(), [&](std::size_t s) {
-        if (domain.isActive(s)) mX[s] = domain.coordOf(s).asVec3s();
-    });
-    mStats = {};
-    mStats.voxels = domain.activeVoxelCount();
+    std::vector<std::uint32_t> all(domain.blockCount());
+    for (std::size_t b = 0; b < all.size(); ++b) all[b] = std::uint32_t(b);
+    return all;
 }
 
-void AdvectedNoise::advance(const OutputDomain& domain, const VelocityField& field, double dt)
+/// The blocks of `domain` with a voxel within `reach` voxels (per axis) of the blocks `blocks` of
+/// `from` (a domain on the same lattice), ascending.
+std::vector<std::uint32_t> blocksNear(const OutputDomain& domain, const OutputDomain& from,
+                                      const std::vector<std::uint32_t>& blocks, int reach)
 {
+    constexpr int B = OutputDomain::kBlockDim;
+    std::vector<std::uint8_t> mark(domain.blockCount(), 0);
+    for (std::uint32_t b : blocks) {
+        const openvdb::Coord lo = from.blockOrigin(b) - openvdb::Coord(reach);
+        const openvdb::Coord hi = from.blockOrigin(b) + openvdb::Coord(B - 1 + reach);
+        for (int x = detail::floorDiv(lo[0], B); x <= detail::floorDiv(hi[0], B); ++x)
+            for (int y = detail::floorDiv(lo[1], B); y <= detail::floorDiv(hi[1], B); ++y)
+                for (int z = detail::floorDiv(lo[2], B); z <= detail::floorDiv(hi[2], B); ++z) {
+                    const std::int64_t n = domain.blockOf(openvdb::Coord(x * B, y * B, z * B));
+                    if (n >= 0) mark[std::size_t(n)] = 1;
+                }
+    }
+    std::vector<std::uint32_t> out;
+    for (std::size_t b = 0; b < mark.size(); ++b)
+        if (mark[b]) out.push_back(std::uint32_t(b));
+    return out;
+}
+
+std::string voxelName(const openvdb::Coord& c)
+{
+    return "(" + std::to_string(c[0]) + ", " + std::to_string(c[1]) + ", " + std::to_string(c[2]) + ")";
+}
+
+template<typename T>
+void put(std::string& out, const T* v, std::size_t n)
+{
+    out.append(reinterpret_cast<const char*>(v), n * sizeof(T));
+}
+
+template<typename T>
+void take(const std::string& in, std::size_t& at, T* v, std::size_t n)
+{
+    if (at + n * sizeof(T) > in.size()) throw Error("carried noise: truncated block message");
+    std::memcpy(v, in.data() + at, n * sizeof(T));
+    at += n * sizeof(T);
+}
+
+} // namespace
+
+std::vector<std::uint32_t> AdvectedNoise::sourceBlocks(const OutputDomain& prev, const OutputDomain& next,
+                                                       const std::vector<std::uint32_t>& keep, double displacement)
+{
+    // advance() computes the kept blocks and their neighbours (the refresh test looks one voxel
+    // on), each voxel reading the previous frame at the voxel nearest its back-traced position.
+    const std::vector<std::uint32_t> computed = blocksNear(next, next, keep, 1);
+    const int reach = int(std::ceil(std::max(0.0, displacement) + 0.5)) + 1;
+    return blocksNear(prev, next, computed, reach);
+}
+
+void AdvectedNoise::hold(const OutputDomain& domain, const std::vector<std::uint32_t>& blocks)
+{
+    mDomain = std::make_unique<OutputDomain>(domain);
+    mLocal.assign(domain.blockCount(), -1);
+    mHeld = blocks;
+    for (std::size_t i = 0; i < blocks.size(); ++i) mLocal[blocks[i]] = std::int32_t(i);
+}
+
+void AdvectedNoise::start(const OutputDomain& domain, const Part* part)
+{
+    constexpr int V = OutputDomain::kBlockVoxels;
+    hold(domain, part ? part->keep : allBlocks(domain));
+    mX.assign(mHeld.size() * V, openvdb::Vec3f(0.0f));
+    mGen.assign(mHeld.size() * V, 0);
+    mGeneration = 0;
+    tbb::parallel_for(std::size_t(0), mHeld.size(), [&](std::size_t i) {
+        const std::size_t b = mHeld[i];
+        for (int off = 0; off < V; ++off)
+            if (domain.blockMask(b).isOn(openvdb::Index(off)))
+                mX[i * V + std::size_t(off)] = domain.coordOf(b * V + std::size_t(off)).asVec3s();
+    });
+    mStats = {};
+    if (!part) {
+        mStats.voxels = domain.activeVoxelCount();
+    } else {
+        for (std::uint32_t b : part->own) mStats.voxels += domain.blockMask(b).countOn();
+    }
+}
+
+void AdvectedNoise::advance(const OutputDomain& domain, const VelocityField& field, double dt, const Part* part)
+{
+    constexpr int V = OutputDomain::kBlockVoxels;
     if (!mDomain) throw Error("AdvectedNoise::advance before start");
     const OutputDomain& prev = *mDomain;
     const std::uint32_t gen = ++mGeneration;
-    const std::size_t S = domain.slotCount();
+    // Pass 1 over the kept blocks and their neighbours (one process: every block): carry or enter.
+    const std::vector<std::uint32_t> keep = part ? part->keep : allBlocks(domain);
+    const std::vector<std::uint32_t> near = part ? blocksNear(domain, domain, keep, 1) : keep;
+    std::vector<std::int32_t> nearLocal(domain.blockCount(), -1);
+    for (std::size_t i = 0; i < near.size(); ++i) nearLocal[near[i]] = std::int32_t(i);
+    const std::size_t S = near.size() * V;
     std::vector<openvdb::Vec3f> X(S, openvdb::Vec3f(0.0f));
     std::vector<std::uint32_t> G(S, 0);
     std::vector<std::uint8_t> how(S, 0); // 1 carried, 2 entered
-    tbb::parallel_for(std::size_t(0), S, [&](std::size_t s) {
-        if (!domain.isActive(s)) return;
-        const openvdb::Coord ijk = domain.coordOf(s);
-        openvdb::Vec3d p;
-        if (traceBack(domain, field, ijk, dt, p)) {
-            const openvdb::Coord q = OutputDomain::nearestVoxel(p);
-            const std::int64_t ps = prev.slotOf(q);
-            if (ps >= 0) {
-                X[s] = mX[std::size_t(ps)] + openvdb::Vec3f(p - q.asVec3d());
-                G[s] = mGen[std::size_t(ps)];
-                how[s] = 1;
-                return;
+    tbb::parallel_for(std::size_t(0), near.size(), [&](std::size_t i) {
+        const std::size_t b = near[i];
+        for (int off = 0; off < V; ++off) {
+            if (!domain.blockMask(b).isOn(openvdb::Index(off))) continue;
+            const std::size_t s = i * V + std::size_t(off);
+            const openvdb::Coord ijk = domain.coordOf(b * V + std::size_t(off));
+            openvdb::Vec3d p;
+            if (traceBack(domain, field, ijk, dt, p)) {
+                const openvdb::Coord q = OutputDomain::nearestVoxel(p);
+                const std::int64_t ps = prev.slotOf(q);
+                if (ps >= 0) {
+                    const std::uint32_t pb = std::uint32_t(ps / V);
+                    if (mLocal[pb] < 0) {
+                        throw Error("internal error: carried noise: voxel " + voxelName(ijk) + " reaches back to " +
+                                    voxelName(q) + ", whose block this process does not hold");
+                    }
+                    const std::size_t ls = base(pb) + std::size_t(ps % V);
+                    X[s] = mX[ls] + openvdb::Vec3f(p - q.asVec3d());
+                    G[s] = mGen[ls];
+                    how[s] = 1;
+                    continue;
+                }
             }
-        }
-        X[s] = ijk.asVec3s();
-        G[s] = gen;
-        how[s] = 2;
-    });
-    // Refresh where the carried coordinates no longer step by about one voxel per voxel.
-    std::vector<std::uint8_t> refresh(S, 0);
-    tbb::parallel_for(std::size_t(0), S, [&](std::size_t s) {
-        if (how[s] != 1) return;
-        const openvdb::Coord ijk = domain.coordOf(s);
-        for (int a = 0; a < 3; ++a) {
-            openvdb::Coord n = ijk;
-            n[a] += 1;
-            const std::int64_t ns = domain.slotOf(n);
-            if (ns < 0 || G[std::size_t(ns)] != G[s]) continue;
-            const float d = (X[std::size_t(ns)] - X[s]).length();
-            if (d < 0.5f || d > 2.0f) {
-                refresh[s] = 1;
-                return;
-            }
-        }
-    });
-    Stats st;
-    st.voxels = domain.activeVoxelCount();
-    for (std::size_t s = 0; s < S; ++s) {
-        if (refresh[s]) {
-            X[s] = domain.coordOf(s).asVec3s();
+            X[s] = ijk.asVec3s();
             G[s] = gen;
-            ++st.refreshed;
-        } else if (how[s] == 1) {
-            ++st.carried;
-        } else if (how[s] == 2) {
-            ++st.entered;
+            how[s] = 2;
         }
+    });
+    // Pass 2 over the kept blocks: refresh where the carried coordinates no longer step by about
+    // one voxel per voxel; keep the result.
+    auto nearSlot = [&](std::int64_t slot) {
+        const std::int32_t l = nearLocal[std::size_t(slot / V)];
+        if (l < 0) throw Error("internal error: carried noise: a neighbour's block was not computed");
+        return std::size_t(l) * V + std::size_t(slot % V);
+    };
+    std::vector<openvdb::Vec3f> KX(keep.size() * V, openvdb::Vec3f(0.0f));
+    std::vector<std::uint32_t> KG(keep.size() * V, 0);
+    std::vector<std::uint8_t> state(keep.size() * V, 0); // how, or 3: refreshed
+    tbb::parallel_for(std::size_t(0), keep.size(), [&](std::size_t i) {
+        const std::size_t b = keep[i];
+        for (int off = 0; off < V; ++off) {
+            if (!domain.blockMask(b).isOn(openvdb::Index(off))) continue;
+            const std::size_t k = i * V + std::size_t(off), s = nearSlot(std::int64_t(b * V) + off);
+            const openvdb::Coord ijk = domain.coordOf(b * V + std::size_t(off));
+            bool refresh = false;
+            if (how[s] == 1) {
+                for (int a = 0; a < 3 && !refresh; ++a) {
+                    openvdb::Coord n = ijk;
+                    n[a] += 1;
+                    const std::int64_t ns = domain.slotOf(n);
+                    if (ns < 0) continue;
+                    const std::size_t t = nearSlot(ns);
+                    if (G[t] != G[s]) continue;
+                    const float d = (X[t] - X[s]).length();
+                    refresh = d < 0.5f || d > 2.0f;
+                }
+            }
+            KX[k] = refresh ? ijk.asVec3s() : X[s];
+            KG[k] = refresh ? gen : G[s];
+            state[k] = refresh ? 3 : how[s];
+        }
+    });
+    hold(domain, keep);
+    mX.swap(KX);
+    mGen.swap(KG);
+    Stats st;
+    auto count = [&](std::uint32_t b) {
+        const std::size_t i = std::size_t(mLocal[b]);
+        for (int off = 0; off < V; ++off) {
+            const std::uint8_t h = state[i * V + std::size_t(off)];
+            st.carried += h == 1, st.entered += h == 2, st.refreshed += h == 3;
+        }
+    };
+    if (part) {
+        for (std::uint32_t b : part->own) {
+            st.voxels += domain.blockMask(b).countOn();
+            count(b);
+        }
+    } else {
+        st.voxels = domain.activeVoxelCount();
+        for (std::uint32_t b : keep) count(b);
     }
-    mX.swap(X);
-    mGen.swap(G);
-    mDomain = std::make_unique<OutputDomain>(domain);
     mStats = st;
 }
 
 float AdvectedNoise::raw(const openvdb::Coord& ijk) const
 {
+    constexpr int V = OutputDomain::kBlockVoxels;
     const std::int64_t s = mDomain ? mDomain->slotOf(ijk) : -1;
     if (s < 0) return whiteNoise(mSeed, ijk[0], ijk[1], ijk[2]);
-    const openvdb::Coord q = OutputDomain::nearestVoxel(mX[std::size_t(s)]);
-    return whiteNoise(generationSeed(mSeed, mGen[std::size_t(s)]), q[0], q[1], q[2]);
+    const std::size_t b = std::size_t(s / V);
+    if (mLocal[b] < 0)
+        throw Error("internal error: carried noise of voxel " + voxelName(ijk) + " is not held by this process");
+    const std::size_t ls = base(std::uint32_t(b)) + std::size_t(s % V);
+    const openvdb::Coord q = OutputDomain::nearestVoxel(mX[ls]);
+    return whiteNoise(generationSeed(mSeed, mGen[ls]), q[0], q[1], q[2]);
+}
+
+std::string AdvectedNoise::pack(const std::vector<std::uint32_t>& blocks) const
+{
+    constexpr int V = OutputDomain::kBlockVoxels;
+    std::string out;
+    out.reserve(blocks.size() * (12 + V * 16));
+    for (std::uint32_t b : blocks) {
+        if (!holds(b)) throw Error("internal error: carried noise: packing a block this process does not hold");
+        const openvdb::Coord o = mDomain->blockOrigin(b);
+        const std::int32_t origin[3] = {o[0], o[1], o[2]};
+        put(out, origin, 3);
+        put(out, &mX[base(b)], V);
+        put(out, &mGen[base(b)], V);
+    }
+    return out;
+}
+
+void AdvectedNoise::unpack(const std::string& bytes)
+{
+    constexpr int V = OutputDomain::kBlockVoxels;
+    if (!mDomain) throw Error("AdvectedNoise::unpack before start");
+    std::size_t at = 0;
+    while (at < bytes.size()) {
+        std::int32_t origin[3];
+        take(bytes, at, origin, 3);
+        const openvdb::Coord o(origin[0], origin[1], origin[2]);
+        const std::int64_t b = mDomain->blockOf(o);
+        if (b < 0 || mDomain->blockOrigin(std::size_t(b)) != o)
+            throw Error("carried noise: a block message names block " + voxelName(o) + ", which the frame does not have");
+        if (holds(std::uint32_t(b))) {
+            at += V * (sizeof(openvdb::Vec3f) + sizeof(std::uint32_t));
+            if (at > bytes.size()) throw Error("carried noise: truncated block message");
+            continue;
+        }
+        mLocal[std::size_t(b)] = std::int32_t(mHeld.size());
+        mHeld.push_back(std::uint32_t(b));
+        mX.resize(mX.size() + V);
+        mGen.resize(mGen.size() + V);
+        take(bytes, at, &mX[mX.size() - V], V);
+        take(bytes, at, &mGen[mGen.size() - V], V);
+    }
 }
 
 // ---- SpotFlock ---------------------------------------------------------------------------------

@@ -339,6 +339,48 @@ std::vector<std::string> Job::allGather(const std::string& bytes, const char* wh
     return out;
 }
 
+std::vector<std::string> Job::exchange(std::vector<std::string> out, const char* what)
+{
+    if (out.size() != std::size_t(mSize)) throw lic::Error("internal error: exchange needs one message per rank");
+    if (!distributed()) return out;
+    agree(nullptr, what);
+    std::vector<std::string> in(static_cast<std::size_t>(mSize));
+#ifdef LICVDB_WITH_MPI
+    try {
+        std::vector<std::uint64_t> sendSizes(static_cast<std::size_t>(mSize)), recvSizes(static_cast<std::size_t>(mSize));
+        for (int r = 0; r < mSize; ++r) sendSizes[std::size_t(r)] = out[std::size_t(r)].size();
+        MPI_Alltoall(sendSizes.data(), 1, MPI_UINT64_T, recvSizes.data(), 1, MPI_UINT64_T, MPI_COMM_WORLD);
+        std::vector<MPI_Request> requests;
+        for (int r = 0; r < mSize; ++r) {
+            if (r == mRank) continue;
+            std::string& s = in[std::size_t(r)];
+            s.resize(recvSizes[std::size_t(r)]);
+            for (std::size_t at = 0; at < s.size(); at += kChunk) {
+                requests.emplace_back();
+                MPI_Irecv(s.data() + at, int(std::min(kChunk, s.size() - at)), MPI_BYTE, r, kTagData, MPI_COMM_WORLD,
+                          &requests.back());
+            }
+        }
+        for (int r = 0; r < mSize; ++r) {
+            if (r == mRank) continue;
+            const std::string& s = out[std::size_t(r)];
+            for (std::size_t at = 0; at < s.size(); at += kChunk) {
+                requests.emplace_back();
+                MPI_Isend(s.data() + at, int(std::min(kChunk, s.size() - at)), MPI_BYTE, r, kTagData, MPI_COMM_WORLD,
+                          &requests.back());
+            }
+        }
+        MPI_Waitall(int(requests.size()), requests.data(), MPI_STATUSES_IGNORE);
+    } catch (const std::bad_alloc&) {
+        abort("licvdb bake: error: rank " + std::to_string(mRank) + " of " + std::to_string(mSize) +
+                  " ran out of memory while " + what,
+              1);
+    }
+#endif
+    in[std::size_t(mRank)] = std::move(out[std::size_t(mRank)]);
+    return in;
+}
+
 void Job::gatherLeaves(openvdb::GridPtrVec& grids, const std::vector<bool>& skip)
 {
     if (!distributed()) return;

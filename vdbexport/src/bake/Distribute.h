@@ -64,6 +64,11 @@ public:
     /// Every rank's `bytes`, by rank, on every rank.
     std::vector<std::string> allGather(const std::string& bytes, const char* what);
 
+    /// Point-to-point exchange: `out[r]` goes to rank r (out.size() == size()); returns what
+    /// each rank sent this one, by rank (its own out[rank()] included). Follows an agreement
+    /// point; an error in the middle of the transfer aborts the job.
+    std::vector<std::string> exchange(std::vector<std::string> out, const char* what);
+
     /// The leaves of a frame's grids: the root adds every other rank's leaves to `grids` (rank by
     /// rank, grid by grid); the others send theirs. Grids whose index is in `skip` (the static
     /// grids already gathered with an earlier frame) are left out. Follows an agreement point.

@@ -230,13 +230,13 @@ int fieldMargin(const Plan& plan, int upsample, int stride)
     return int(std::ceil(out / upsample)) + 2 + (scalars ? 5 : 0);
 }
 
-FieldShare readFieldShare(const Plan& plan, int rank, int ranks)
+FieldShare readFieldShare(const Plan& plan, int rank, int ranks, const std::string& whole)
 {
     const Recipe& r = plan.recipe;
     FieldShare s;
     std::string velName;
     if (ranks > 1) {
-        s.wholeReason = wholeReadReason(r, velName);
+        s.wholeReason = whole.empty() ? wholeReadReason(r, velName) : whole;
         if (s.wholeReason.empty()) {
             s.partial = true;
             readPart(plan, rank, ranks, velName, s);

@@ -86,6 +86,16 @@ double loopVoxelsPerFrame(const Plan& plan)
     return double(lic::detail::ripplePeriod(s)) * s.step / double(plan.frames);
 }
 
+SpotShare spotShareOf(const Plan& plan, const FieldShare& share)
+{
+    SpotShare out;
+    out.reach = bricksBox(*share.layout, share.mine, spotReach(plan));
+    out.ownBlocks.assign(share.domain->blockCount(), false);
+    for (std::size_t id : share.mine)
+        for (std::uint32_t b : (*share.layout)[id].blocks) out.ownBlocks[b] = true;
+    return out;
+}
+
 lic::CompositeSettings compositeSettings(const Plan& plan, const Ranges& ranges)
 {
     const Recipe& r = plan.recipe;
@@ -129,7 +139,8 @@ void FrameBake::read(const FrameOptions& options)
     // them (all of them in one process; in a distributed bake only the part of the field they
     // need, where the format allows: see bake/FieldShare.h).
     const auto t0 = Clock::now();
-    share = mJob.stage("reading the field", [&] { return readFieldShare(mPlan, mJob.rank(), mJob.size()); });
+    share = mJob.stage("reading the field",
+                       [&] { return readFieldShare(mPlan, mJob.rank(), mJob.size(), options.wholeField); });
     if (share.partial) {
         const double maxSpeed = mJob.maxAll(share.extent.maxSpeed, "reading the field");
         mJob.stage("reading the field", [&] { makeField(share, maxSpeed); });
@@ -139,7 +150,7 @@ void FrameBake::read(const FrameOptions& options)
         for (const lic::Brick& b : mMine->bricks()) mMineBlocks.insert(mMineBlocks.end(), b.blocks.begin(), b.blocks.end());
     }
     for (const lic::Brick& b : mine().bricks()) shareVoxels += b.activeVoxels;
-    if (options.onField) options.onField(share);
+    if (options.onField) mJob.stage("reading the field", [&] { options.onField(share); });
     seconds.read = since(t0);
 }
 
@@ -169,10 +180,7 @@ void FrameBake::makeTexture(const FrameOptions& options)
     input = mJob.stage("making the input texture", [&] {
         if (options.input) return options.input(mPlan, share, *scalars);
         if (!mJob.distributed()) return makeInput(mPlan, domain(), *scalars);
-        SpotShare spotShare;
-        spotShare.reach = bricksBox(layout(), share.mine, spotReach(mPlan));
-        spotShare.ownBlocks.assign(domain().blockCount(), false);
-        for (std::uint32_t b : mMineBlocks) spotShare.ownBlocks[b] = true;
+        const SpotShare spotShare = spotShareOf(mPlan, share);
         return makeInput(mPlan, domain(), *scalars, &spotShare);
     });
     spotCount = mPlan.spots ? mJob.sumAll(input.spotCount, "making the input texture") : 0;

@@ -56,6 +56,8 @@ struct FrameOptions
     std::function<void(const FieldShare&)> onField;
     /// World units per second per unit of the field's velocity (a sequence's cache units); empty = 1.
     std::function<double(const FieldShare&)> velocityScale;
+    /// Distributed: why every rank reads the whole field ("" = a part where the format allows).
+    std::string wholeField;
 };
 
 /// One frame baked up to its composited grids (call compositor->frame(f) to get them). Not
@@ -103,6 +105,10 @@ private:
     std::optional<lic::BrickLayout> mMine;       ///< distributed: this rank's bricks
     std::vector<std::uint32_t> mMineBlocks;      ///< distributed: their blocks
 };
+
+/// A process's part of a distributed spot bake: the spots that can reach `share.mine`'s bricks,
+/// and its own blocks (those of its bricks).
+SpotShare spotShareOf(const Plan& plan, const FieldShare& share);
 
 /// What compositing needs to know of a plan: the recipe's settings, free of the recipe.
 lic::CompositeSettings compositeSettings(const Plan& plan, const Ranges& ranges);

@@ -56,6 +56,22 @@ lic::SpotSet makeSpotSet(const Recipe& r, const lic::OutputDomain& domain, openv
 
 } // namespace
 
+lic::SpotSet spotsOfShare(const lic::SpotSet& all, const lic::OutputDomain& domain, const SpotShare& share,
+                          std::uint64_t& owned)
+{
+    lic::SpotSet set;
+    owned = 0;
+    for (std::size_t i = 0; i < all.centers.size(); ++i) {
+        const openvdb::Vec3d& c = all.centers[i];
+        if (!share.reach.isInside(c)) continue;
+        set.centers.push_back(c);
+        set.weights.push_back(i < all.weights.size() ? all.weights[i] : 1.0f);
+        const std::int64_t b = domain.blockOf(lic::OutputDomain::nearestVoxel(c));
+        if (b >= 0 && share.ownBlocks[std::size_t(b)]) ++owned;
+    }
+    return set;
+}
+
 Input makeInput(const Plan& plan, const lic::OutputDomain& domain, lic::ScalarSet& scalars, const SpotShare* share,
                 lic::NoiseTexture::RawNoise raw)
 {

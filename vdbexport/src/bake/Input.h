@@ -32,6 +32,11 @@ struct SpotShare
     std::vector<bool> ownBlocks;     ///< per domain block: one of this process's bricks holds it
 };
 
+/// The spots of `all` (in order) that a process with `share` keeps; `owned` counts those whose
+/// centre lies in its own blocks.
+lic::SpotSet spotsOfShare(const lic::SpotSet& all, const lic::OutputDomain& domain, const SpotShare& share,
+                          std::uint64_t& owned);
+
 /// `share`: null for the whole bake (one process).
 /// @throw lic::InputError for a surface scalar without ridges above its threshold.
 /// `raw`: the noise bake's per-voxel white noise when it is not the seed's (an unsteady

@@ -23,7 +23,9 @@
 #include <sys/resource.h>
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <optional>
 #include <set>
@@ -92,10 +94,6 @@ FieldFrames checkSequence(const Recipe& recipe)
         throw lic::InputError("animation.frames: must be 1 with an unsteady field sequence (" + recipe.field.path +
                               "): a sequence plays once, it is not a loop (got " + std::to_string(recipe.animation.frames) + ")");
     }
-    if (Job::current().distributed()) {
-        throw lic::InputError("an unsteady sequence (field.frames) runs as one process: run it without mpirun "
-                              "(its frames depend on each other; distributing them is not supported yet)");
-    }
     if (recipe.input.surface) {
         throw lic::InputError("input.surface: spots on a ridge surface are not carried through an unsteady sequence "
                               "(the surface moves with the flow); use spots that fill the volume, or bake frames one by one");
@@ -118,41 +116,144 @@ FieldFrames checkSequence(const Recipe& recipe)
     return frames;
 }
 
+/// The blocks of `domain` with a voxel within `reach` voxels of the boxes of `bricks` (ids in
+/// `layout`), as a mark per block.
+std::vector<std::uint8_t> blocksNearBricks(const lic::OutputDomain& domain, const lic::BrickLayout& layout,
+                                           const std::vector<std::size_t>& bricks, int reach)
+{
+    constexpr int B = lic::OutputDomain::kBlockDim;
+    std::vector<std::uint8_t> mark(domain.blockCount(), 0);
+    for (std::size_t id : bricks) {
+        const openvdb::CoordBBox box = layout[id].box.expandBy(reach);
+        for (int x = lic::detail::floorDiv(box.min()[0], B); x <= lic::detail::floorDiv(box.max()[0], B); ++x)
+            for (int y = lic::detail::floorDiv(box.min()[1], B); y <= lic::detail::floorDiv(box.max()[1], B); ++y)
+                for (int z = lic::detail::floorDiv(box.min()[2], B); z <= lic::detail::floorDiv(box.max()[2], B); ++z) {
+                    const std::int64_t b = domain.blockOf(openvdb::Coord(x * B, y * B, z * B));
+                    if (b >= 0) mark[std::size_t(b)] = 1;
+                }
+    }
+    return mark;
+}
+
+std::vector<std::uint32_t> listOf(const std::vector<std::uint8_t>& mark)
+{
+    std::vector<std::uint32_t> out;
+    for (std::size_t b = 0; b < mark.size(); ++b)
+        if (mark[b]) out.push_back(std::uint32_t(b));
+    return out;
+}
+
 /// The texture carried from frame to frame: noise advected (Lagrangian–Eulerian) or a flock of
 /// spots moving with the flow. Frame one is made as a still bake's.
+///
+/// Distributed (docs/distributed.md): every rank reads each frame's field whole. The spots (a few
+/// per spacing³) are held and moved by every rank alike, and each rank keeps those that reach its
+/// bricks. The noise state (16 bytes per output voxel) is held in parts: each rank keeps the
+/// blocks its bricks and their ghost margins read; before advancing, it receives from the ranks
+/// that owned them in the previous frame the blocks it reaches back to that it does not hold
+/// (the previous frame's bricks' owners send; the margin is one block plus the frame's largest
+/// displacement), so only the margins travel.
 class CarriedTexture
 {
 public:
-    explicit CarriedTexture(const Recipe& recipe) : mRecipe(recipe), mNoise(recipe.input.seed) {}
+    CarriedTexture(const Recipe& recipe, Job& job) : mRecipe(recipe), mJob(job), mNoise(recipe.input.seed) {}
 
     /// The input of frame index k (0-based), `dt` seconds after the previous frame.
     Input next(int k, double dt, const Plan& plan, const FieldShare& share, lic::ScalarSet& scalars);
-    /// Counters of the last step, for the frame's summary.
+    /// Counters of the last step (the whole bake's), for the frame's summary.
     const nlohmann::json& counters() const { return mCounters; }
+    /// Distributed noise: blocks of state held now, and bytes received from other ranks so far.
+    std::size_t heldBlocks() const { return mHeldBlocks; }
+    std::uint64_t receivedBytes() const { return mReceived; }
 
 private:
+    Input noise(int k, double dt, const Plan& plan, const FieldShare& share, lic::ScalarSet& scalars);
     Input spots(int k, double dt, const Plan& plan, const FieldShare& share, lic::ScalarSet& scalars);
+    /// Distributed noise: receive the previous frame's blocks this rank's part of frame k reads.
+    void importMargins(const FieldShare& share, double dt, const std::vector<std::vector<std::uint8_t>>& keep);
 
     const Recipe& mRecipe;
+    Job& mJob;
     lic::AdvectedNoise mNoise;
     std::optional<lic::SpotFlock> mFlock;
     nlohmann::json mCounters;
+    // Distributed noise: per rank, the blocks of the current frame it keeps; this rank's own.
+    std::vector<std::vector<std::uint8_t>> mKeep;
+    std::vector<std::uint8_t> mOwn;
+    std::size_t mHeldBlocks = 0;
+    std::uint64_t mReceived = 0;
 };
 
 Input CarriedTexture::next(int k, double dt, const Plan& plan, const FieldShare& share, lic::ScalarSet& scalars)
 {
-    if (plan.spots) return spots(k, dt, plan, share, scalars);
+    return plan.spots ? spots(k, dt, plan, share, scalars) : noise(k, dt, plan, share, scalars);
+}
+
+void CarriedTexture::importMargins(const FieldShare& share, double dt, const std::vector<std::vector<std::uint8_t>>& keep)
+{
+    const lic::OutputDomain& prev = *mNoise.domain();
     const lic::OutputDomain& domain = *share.domain;
-    if (k == 0) mNoise.start(domain);
-    else mNoise.advance(domain, *share.field, dt);
+    // The frame's largest move in output voxels (√3: a staggered field's sampled velocity can
+    // exceed the largest cell-centred speed by that factor, never more).
+    const double displacement = std::sqrt(3.0) * share.field->maxSpeed() * std::abs(dt) / domain.voxelSize();
+    std::vector<std::string> out(std::size_t(mJob.size()));
+    for (int q = 0; q < mJob.size(); ++q) {
+        if (q == mJob.rank()) continue;
+        std::vector<std::uint32_t> send;
+        for (std::uint32_t b : lic::AdvectedNoise::sourceBlocks(prev, domain, listOf(keep[std::size_t(q)]), displacement))
+            if (mOwn[b] && !mKeep[std::size_t(q)][b]) send.push_back(b);
+        out[std::size_t(q)] = mNoise.pack(send);
+    }
+    const std::vector<std::string> in = mJob.exchange(std::move(out), "exchanging the texture's margins");
+    for (int r = 0; r < mJob.size(); ++r) {
+        if (r == mJob.rank()) continue;
+        mReceived += in[std::size_t(r)].size();
+        mNoise.unpack(in[std::size_t(r)]);
+    }
+}
+
+Input CarriedTexture::noise(int k, double dt, const Plan& plan, const FieldShare& share, lic::ScalarSet& scalars)
+{
+    const lic::OutputDomain& domain = *share.domain;
+    std::optional<lic::AdvectedNoise::Part> part;
+    std::vector<std::vector<std::uint8_t>> keep;
+    if (mJob.distributed()) {
+        // Every rank's part of this frame: the blocks its bricks' noise reads (the ghost margin and
+        // the filter's two voxels), and its own blocks.
+        const int reach = lic::ghostMargin(plan.settings) + 2;
+        for (int q = 0; q < mJob.size(); ++q)
+            keep.push_back(blocksNearBricks(domain, *share.layout, bricksOf(share.assignment, q), reach));
+        part.emplace();
+        part->keep = listOf(keep[std::size_t(mJob.rank())]);
+        for (std::size_t id : share.mine)
+            part->own.insert(part->own.end(), (*share.layout)[id].blocks.begin(), (*share.layout)[id].blocks.end());
+        std::sort(part->own.begin(), part->own.end());
+    }
+    const lic::AdvectedNoise::Part* p = part ? &*part : nullptr;
+    if (k == 0) {
+        mNoise.start(domain, p);
+    } else {
+        if (p) importMargins(share, dt, keep);
+        mNoise.advance(domain, *share.field, dt, p);
+    }
+    if (p) {
+        mKeep = std::move(keep);
+        mOwn.assign(domain.blockCount(), 0);
+        for (std::uint32_t b : p->own) mOwn[b] = 1;
+        mHeldBlocks = p->keep.size();
+    }
     Input input = makeInput(plan, domain, scalars, nullptr, mNoise.rawNoise());
     const auto& ns = mNoise.stats();
-    mCounters = {{"voxels", ns.voxels}, {"carried", ns.carried}, {"entered", ns.entered}, {"refreshed", ns.refreshed}};
+    std::vector<std::uint64_t> c = {ns.voxels, ns.carried, ns.entered, ns.refreshed};
+    mJob.sumAll(c, "making the input texture");
+    mCounters = {{"voxels", c[0]}, {"carried", c[1]}, {"entered", c[2]}, {"refreshed", c[3]}};
     return input;
 }
 
 Input CarriedTexture::spots(int k, double dt, const Plan& plan, const FieldShare& share, lic::ScalarSet& scalars)
 {
+    // Every rank holds and moves the whole flock (the field is read whole), then keeps the spots
+    // that reach its bricks, as a still distributed bake does.
     const lic::OutputDomain& domain = *share.domain;
     Input input;
     if (k == 0) {
@@ -174,9 +275,11 @@ Input CarriedTexture::spots(int k, double dt, const Plan& plan, const FieldShare
         mFlock->advance(domain, *share.field, dt, k + 1, accept);
         input.spots = mFlock->current();
     }
-    input.spotCount = input.spots.centers.size();
+    const std::size_t total = input.spots.centers.size();
+    input.spotCount = total;
+    if (mJob.distributed()) input.spots = spotsOfShare(input.spots, domain, spotShareOf(plan, share), input.spotCount);
     const lic::SpotFlock::Stats& moved = mFlock->stats();
-    mCounters = {{"spots", input.spotCount}, {"born", moved.born}, {"left", moved.left}, {"retiring", moved.retiring}};
+    mCounters = {{"spots", total}, {"born", moved.born}, {"left", moved.left}, {"retiring", moved.retiring}};
     return input;
 }
 
@@ -201,10 +304,14 @@ void checkSameGrid(const FieldShare& share, const std::string& path, int number,
 /// What the sequence keeps from frame to frame.
 struct SequenceState
 {
-    SequenceState(const Recipe& r, const FieldFrames& f) : recipe(r), frames(f), resolved(r.toJson()), texture(r) {}
+    SequenceState(const Recipe& r, const FieldFrames& f, Job& j)
+        : recipe(r), frames(f), job(j), resolved(r.toJson()), texture(r, j)
+    {
+    }
 
     const Recipe& recipe;
     const FieldFrames& frames;
+    Job& job;
     const nlohmann::json resolved;
     OutputSet output;
     CarriedTexture texture;
@@ -213,8 +320,44 @@ struct SequenceState
     std::string grid0, velocityUnit;
     std::vector<std::string> paths;
     nlohmann::json perFrame = nlohmann::json::array(), firstGrids, spotsJson = nullptr, colorJson = nullptr;
-    double sumRead = 0, sumInput = 0, sumConvolve = 0, sumCompose = 0, sumWrite = 0;
+    double sumRead = 0, sumInput = 0, sumConvolve = 0, sumCompose = 0, sumWrite = 0, sumGather = 0;
 };
+
+/// Stage frame `number`'s grids: in one process directly; distributed, rank 0 adds every other
+/// rank's leaves first (each frame's grids are its own: nothing is skipped) and stages, and every
+/// rank agrees on the outcome.
+void stageGathered(SequenceState& seq, FrameBake& fb, const Recipe& fr, const openvdb::MetaMap& meta, int number,
+                   openvdb::GridPtrVec& grids)
+{
+    Job& job = seq.job;
+    const std::string composing = "composing frame " + std::to_string(number);
+    if (!job.distributed()) {
+        grids = fb.compositor->frame(1);
+        stageFrame(fr, grids, meta, number, fr.output.path, seq.output);
+        return;
+    }
+    if (job.root()) {
+        try {
+            job.injectFault(composing.c_str());
+            grids = fb.compositor->frame(1);
+            job.agree(nullptr, composing.c_str());
+            const auto tg = Clock::now();
+            job.gatherLeaves(grids, {});
+            seq.sumGather += since(tg);
+            job.injectFault(("writing frame " + std::to_string(number)).c_str());
+            stageFrame(fr, grids, meta, number, fr.output.path, seq.output);
+        } catch (...) {
+            if (job.failed()) throw;
+            job.agree(std::current_exception(), "writing");
+        }
+    } else {
+        grids = job.stage(composing.c_str(), [&] { return fb.compositor->frame(1); });
+        const auto tg = Clock::now();
+        job.gatherLeaves(grids, {});
+        seq.sumGather += since(tg);
+    }
+    job.agree(nullptr, "writing");
+}
 
 /// Bake frame index k of the sequence and stage its file.
 void bakeFrame(SequenceState& seq, int k, FrameProgress& progress)
@@ -228,9 +371,10 @@ void bakeFrame(SequenceState& seq, int k, FrameProgress& progress)
     fr.field.path = seq.frames.paths[std::size_t(k)];
     fr.field.frames.reset();
     fr.output.path = numberedPath(recipe.output.path, number);
-    const Plan plan = makePlan(fr);
+    const Plan plan = seq.job.stage("planning the bake", [&] { return makePlan(fr); });
 
     FrameOptions options;
+    if (seq.job.distributed()) options.wholeField = "an unsteady sequence reads each frame whole on every rank";
     if (k > 0) options.ranges = &seq.ranges; // automatic ranges from the first frame, kept for all
     options.onField = [&](const FieldShare& share) {
         if (k == 0) {
@@ -247,7 +391,7 @@ void bakeFrame(SequenceState& seq, int k, FrameProgress& progress)
     options.velocityScale = [&](const FieldShare& share) {
         return worldPerSecond(*share.loaded.velocity, seq.velocityUnit);
     };
-    FrameBake fb(plan, Job::current(), progress, std::move(options));
+    FrameBake fb(plan, seq.job, progress, std::move(options));
     if (k == 0) seq.ranges = fb.ranges;
 
     // Stage the frame.
@@ -261,8 +405,8 @@ void bakeFrame(SequenceState& seq, int k, FrameProgress& progress)
     desc.densityMeta.insertMeta("lic_fps", openvdb::DoubleMetadata(recipe.field.fps));
     desc.densityMeta.insertMeta("licvdb_field_file", openvdb::StringMetadata(fs::path(fr.field.path).filename().string()));
     progress.begin("writing", 1);
-    openvdb::GridPtrVec grids = fb.compositor->frame(1);
-    stageFrame(fr, grids, desc.densityMeta, number, fr.output.path, seq.output);
+    openvdb::GridPtrVec grids;
+    stageGathered(seq, fb, fr, desc.densityMeta, number, grids);
     progress.advance(1);
     progress.end();
     seq.paths.push_back(fr.output.path);
@@ -292,38 +436,79 @@ nlohmann::json bakeSequence(const Recipe& request, lic::Progress& outer)
     const auto t0 = Clock::now();
     Recipe recipe = request;
     if (recipe.lic.engine == "auto") recipe.lic.engine = lic::toString(lic::chooseEngine("auto", recipe.input.type == "spots"));
-    const FieldFrames frames = checkSequence(recipe);
+    Job& job = Job::current();
+    const FieldFrames frames = job.stage("planning the bake", [&] { return checkSequence(recipe); });
     const int count = int(frames.numbers.size());
     raiseFileLimit(std::size_t(count) + 1);
     openvdb::initialize();
     FrameProgress progress(outer);
-    SequenceState seq(recipe, frames);
+    SequenceState seq(recipe, frames, job);
+    // Distributed: rank 0 stages every frame; a job killed before the manifest leaves nothing.
+    std::optional<WriteGuard> guard;
+    if (job.distributed() && job.root()) {
+        std::vector<std::string> paths;
+        for (int number : frames.numbers) paths.push_back(numberedPath(recipe.output.path, number));
+        guard.emplace(paths, manifestPath(recipe.output.path));
+    }
     for (int k = 0; k < count; ++k) bakeFrame(seq, k, progress);
 
     // One manifest for the sequence, then every file at once.
     if (outer.wasInterrupted()) throw lic::Cancelled();
     nlohmann::json fieldFiles = nlohmann::json::array();
     for (const auto& p : frames.paths) fieldFiles.push_back(fs::path(p).filename().string());
-    writeManifest(recipe, seq.resolved, seq.paths, seq.output, seq.firstGrids,
-                  seq.transform0->voxelSize()[0] / double(recipe.output.upsample), seq.colorJson, seq.spotsJson,
-                  {{"cyclic", false}, {"unsteady", true}, {"first_frame", frames.numbers.front()},
-                   {"fps", recipe.field.fps}, {"velocity_unit", seq.velocityUnit}, {"field_files", fieldFiles}});
+    auto manifest = [&] {
+        writeManifest(recipe, seq.resolved, seq.paths, seq.output, seq.firstGrids,
+                      seq.transform0->voxelSize()[0] / double(recipe.output.upsample), seq.colorJson, seq.spotsJson,
+                      {{"cyclic", false}, {"unsteady", true}, {"first_frame", frames.numbers.front()},
+                       {"fps", recipe.field.fps}, {"velocity_unit", seq.velocityUnit}, {"field_files", fieldFiles}});
+    };
+    if (!job.distributed()) {
+        manifest();
+    } else if (job.root()) {
+        try {
+            job.injectFault("writing the manifest");
+            manifest();
+            guard->disarm();
+        } catch (...) {
+            if (job.failed()) throw;
+            job.agree(std::current_exception(), "writing");
+        }
+    }
+    job.agree(nullptr, "writing");
 
     const double total = since(t0);
-    return {{"output", recipe.output.path},
-            {"files", seq.paths},
-            {"frames", count},
-            {"first_frame", frames.numbers.front()},
-            {"unsteady", true},
-            {"fps", recipe.field.fps},
-            {"velocity_unit", seq.velocityUnit},
-            {"manifest", manifestPath(recipe.output.path)},
-            {"field", {{"pattern", recipe.field.path}, {"grid", seq.grid0}, {"files", frames.paths}}},
-            {"engine", recipe.lic.engine},
-            {"per_frame", seq.perFrame},
-            {"seconds", {{"read", seq.sumRead}, {"input", seq.sumInput}, {"convolve", seq.sumConvolve},
-                         {"compose", seq.sumCompose}, {"write", seq.sumWrite}, {"total", total},
-                         {"per_frame", total / double(count)}}}};
+    nlohmann::json summary = {
+        {"output", recipe.output.path},
+        {"files", seq.paths},
+        {"frames", count},
+        {"first_frame", frames.numbers.front()},
+        {"unsteady", true},
+        {"fps", recipe.field.fps},
+        {"velocity_unit", seq.velocityUnit},
+        {"manifest", manifestPath(recipe.output.path)},
+        {"field", {{"pattern", recipe.field.path}, {"grid", seq.grid0}, {"files", frames.paths}}},
+        {"engine", recipe.lic.engine},
+        {"per_frame", seq.perFrame},
+        {"seconds", {{"read", seq.sumRead}, {"input", seq.sumInput}, {"convolve", seq.sumConvolve},
+                     {"compose", seq.sumCompose}, {"write", seq.sumWrite}, {"total", total},
+                     {"per_frame", total / double(count)}}}};
+    if (job.distributed()) {
+        rusage u{};
+        getrusage(RUSAGE_SELF, &u);
+        const nlohmann::json mine = {{"rank", job.rank()},
+                                     {"texture_blocks_held", seq.texture.heldBlocks()},
+                                     {"texture_bytes_received", seq.texture.receivedBytes()},
+                                     {"gather_seconds", seq.sumGather},
+                                     {"peak_rss_mib", double(u.ru_maxrss) / 1024.0}};
+        nlohmann::json ranks = nlohmann::json::array();
+        for (const std::string& text : job.allGather(mine.dump(), "summarising")) ranks.push_back(nlohmann::json::parse(text));
+        summary["mpi"] = {{"ranks", job.size()},
+                          {"partial_read", false},
+                          {"whole_read_reason", "an unsteady sequence reads each frame whole on every rank"},
+                          {"assignment", "each frame's bricks in contiguous Morton runs, balanced by active voxels"}};
+        summary["ranks"] = ranks;
+    }
+    return summary;
 }
 
 } // namespace vdbexport::pipeline

@@ -30,26 +30,43 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
 #include <vector>
 
 namespace lic {
 
 /// Carried noise (see the file comment). Positions are output index space of domains that share
 /// one index lattice (fields of one sequence have one transform).
+///
+/// A distributed sequence holds a part: each process keeps the state of the blocks its bricks and
+/// their margins read (`Part::keep`), and before advancing imports, from the processes that own
+/// them, the previous frame's blocks it reaches back to (sourceBlocks(): the kept blocks grown by
+/// one block and by the frame's displacement). Every voxel's state is computed from the same
+/// inputs by the same arithmetic wherever it is computed, so a part equals the whole on its blocks.
 class AdvectedNoise
 {
 public:
+    /// Blocks (indices into a domain) to compute and keep: null = every block of the domain.
+    struct Part
+    {
+        std::vector<std::uint32_t> keep; ///< ascending: blocks whose state this process keeps
+        std::vector<std::uint32_t> own;  ///< ascending, within keep: blocks counted in stats()
+    };
+
     explicit AdvectedNoise(std::uint64_t seed) : mSeed(seed) {}
 
     /// Frame one: X = x and generation 0, so its noise is the still bake's (whiteNoise(seed, x)).
-    void start(const OutputDomain& domain);
+    void start(const OutputDomain& domain, const Part* part = nullptr);
     /// The next frame: `domain` and `field` are the new frame's, `dt` the time between the frames
     /// in the field's time unit (velocity × dt = world displacement). Parallel over voxels, the
-    /// same result for any thread count.
-    void advance(const OutputDomain& domain, const VelocityField& field, double dt);
+    /// same result for any thread count. With a part, the previous frame's blocks within
+    /// sourceBlocks() of it must be held (import them with unpack() first).
+    /// @throw lic::Error when a voxel reaches back to a block that is not held.
+    void advance(const OutputDomain& domain, const VelocityField& field, double dt, const Part* part = nullptr);
 
     /// White noise in [0, 1) at an output voxel of the current frame (outside its active voxels:
     /// the still noise of the seed). Thread-safe.
+    /// @throw lic::Error for an active voxel of a block this part does not hold.
     float raw(const openvdb::Coord& ijk) const;
     /// raw() as NoiseTexture's RawNoise; the texture must not outlive this object's frame.
     NoiseTexture::RawNoise rawNoise() const
@@ -57,7 +74,22 @@ public:
         return [this](const openvdb::Coord& ijk) { return raw(ijk); };
     }
 
-    /// Counters of the last advance().
+    /// The blocks of `prev` that advance() to `next` reads for the blocks `keep` of `next`: those
+    /// within one block plus `displacement` output voxels (the frame's largest move, ≥ 0) of them.
+    static std::vector<std::uint32_t> sourceBlocks(const OutputDomain& prev, const OutputDomain& next,
+                                                   const std::vector<std::uint32_t>& keep, double displacement);
+    /// The current frame's domain (null before start()).
+    const OutputDomain* domain() const { return mDomain.get(); }
+    /// Whether the state of block `b` of the current domain is held here.
+    bool holds(std::uint32_t b) const { return b < mLocal.size() && mLocal[b] >= 0; }
+    /// The state of held blocks (ascending ids), as bytes for another process's unpack().
+    std::string pack(const std::vector<std::uint32_t>& blocks) const;
+    /// Hold the blocks another process packed (of the same current domain). Blocks held already
+    /// are left as they are (their state is the same wherever it was computed).
+    /// @throw lic::Error for a malformed message or a block the domain does not have.
+    void unpack(const std::string& bytes);
+
+    /// Counters of the last advance() (over the part's own blocks).
     struct Stats
     {
         std::uint64_t voxels = 0;    ///< active voxels of the frame
@@ -69,11 +101,18 @@ public:
     std::uint32_t generation() const { return mGeneration; }
 
 private:
+    /// Local storage index of held block b's first voxel.
+    std::size_t base(std::uint32_t b) const { return std::size_t(mLocal[b]) * OutputDomain::kBlockVoxels; }
+    /// Make `domain` current and index `blocks` (storage is the caller's to fill).
+    void hold(const OutputDomain& domain, const std::vector<std::uint32_t>& blocks);
+
     std::uint64_t mSeed;
     std::uint32_t mGeneration = 0;
-    std::unique_ptr<OutputDomain> mDomain; ///< the current frame's (its slots index the arrays)
-    std::vector<openvdb::Vec3f> mX;        ///< per slot: carried texture coordinate
-    std::vector<std::uint32_t> mGen;       ///< per slot: generation
+    std::unique_ptr<OutputDomain> mDomain; ///< the current frame's (its blocks index mLocal)
+    std::vector<std::int32_t> mLocal;      ///< per block of mDomain: its place in the arrays, or −1
+    std::vector<std::uint32_t> mHeld;      ///< held blocks, in storage order
+    std::vector<openvdb::Vec3f> mX;        ///< per held voxel: carried texture coordinate
+    std::vector<std::uint32_t> mGen;       ///< per held voxel: generation
     Stats mStats;
 };
 
