@@ -61,6 +61,9 @@ protected:
             const lic::PresetField t = lic::makePresetField("tornado", openvdb::Coord(40), double(n) / 24.0);
             vdbexport::writeVdbAtomic((sDir / ("t_000" + std::to_string(n) + ".vdb")).string(), {t.velocity});
         }
+        // A long sequence (the steady abc flow still carries the noise), for parts of each frame.
+        for (int n = 1; n <= 6; ++n)
+            vdbexport::writeVdbAtomic((sDir / ("l_000" + std::to_string(n) + ".vdb")).string(), {abc.velocity});
     }
     static void TearDownTestSuite() { fs::remove_all(sDir); }
 
@@ -455,7 +458,30 @@ TEST_F(MpiBake, AnUnsteadySequenceOfNoiseIsIdenticalToOneProcessInEveryFrame)
         received += rank["texture_bytes_received"].get<std::uint64_t>();
     }
     EXPECT_GT(received, 0u) << r3.out;
+    EXPECT_TRUE(s3["mpi"]["partial_read"].get<bool>()) << r3.out;
     EXPECT_EQ(manifestCore(mOut / "three.licvdb.json"), manifestCore(mOut / "one.licvdb.json"));
+}
+
+TEST_F(MpiBake, EachRankReadsOnlyItsPartOfEveryFrameOfANoiseSequence)
+{
+    // The part's margin grows by what the noise's advance reaches (its kept blocks' neighbours and
+    // half a frame's displacement: ~10 voxels along z at 8 frames per second), and is still less
+    // than the whole on a long field.
+    const std::vector<std::string> args = {"--field", (sDir / "l_####.vdb").string(), "--field-frames", "1,6",
+                                           "--fps", "8", "--upsample", "1", "--brick", "16", "--length", "8",
+                                           "--quiet", "--json"};
+    RunResult r1, r3;
+    bakeOneAndThree(args, r1, r3, "one.vdb", "three.vdb");
+    for (int f = 1; f <= 6; ++f) {
+        const std::string suffix = "_000" + std::to_string(f) + ".vdb";
+        expectSameFiles(mOut / ("one" + suffix), mOut / ("three" + suffix), "long sequence frame " + std::to_string(f));
+    }
+    const json s3 = json::parse(r3.out);
+    EXPECT_TRUE(s3["mpi"]["partial_read"].get<bool>()) << r3.out;
+    std::uint64_t least = ~std::uint64_t(0);
+    for (const json& rank : s3["ranks"]) least = std::min(least, rank["field_voxels_held"].get<std::uint64_t>());
+    EXPECT_LT(least, 16u * 16u * 96u) << r3.out;
+    EXPECT_GT(json::parse(r1.out)["per_frame"][5]["texture"]["carried"].get<std::uint64_t>(), 0u) << r1.out;
 }
 
 TEST_F(MpiBake, AnUnsteadySequenceOfSpotsIsIdenticalToOneProcessInEveryFrame)
@@ -463,6 +489,7 @@ TEST_F(MpiBake, AnUnsteadySequenceOfSpotsIsIdenticalToOneProcessInEveryFrame)
     RunResult r1, r3;
     bakeOneAndThree(sequenceArgs(sDir, "spots"), r1, r3, "one.vdb", "three.vdb");
     expectSameFrames(mOut, "one", "three", 8, "spot sequence");
+    EXPECT_FALSE(json::parse(r3.out)["mpi"]["partial_read"].get<bool>()) << "the flock needs every frame whole";
     const json s1 = json::parse(r1.out), s3 = json::parse(r3.out);
     for (std::size_t f = 0; f < 8; ++f)
         EXPECT_EQ(s3["per_frame"][f]["texture"], s1["per_frame"][f]["texture"]) << "frame " << f + 1;

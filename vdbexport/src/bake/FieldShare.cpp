@@ -115,7 +115,7 @@ double localMaxSpeed(const openvdb::Vec3SGrid& grid)
 }
 
 /// The part of a distributed bake: topology, domain, share, then the clipped grids.
-void readPart(const Plan& plan, int rank, int ranks, const std::string& velName, FieldShare& s)
+void readPart(const Plan& plan, int rank, int ranks, const std::string& velName, int extra, FieldShare& s)
 {
     const Recipe& r = plan.recipe;
     const std::string& path = r.field.path;
@@ -172,7 +172,7 @@ void readPart(const Plan& plan, int rank, int ranks, const std::string& velName,
         openvdb::CoordBBox out;
         for (std::size_t id : s.mine) out.expand((*s.layout)[id].box);
         out.intersect(s.domain->indexBBox());
-        const int m = fieldMargin(plan, K, lic::detail::integrationStride(*s.domain, plan.settings));
+        const int m = fieldMargin(plan, K, lic::detail::integrationStride(*s.domain, plan.settings)) + std::max(0, extra);
         region = openvdb::CoordBBox(
             openvdb::Coord(lic::detail::floorDiv(out.min()[0], K), lic::detail::floorDiv(out.min()[1], K),
                            lic::detail::floorDiv(out.min()[2], K)),
@@ -230,7 +230,7 @@ int fieldMargin(const Plan& plan, int upsample, int stride)
     return int(std::ceil(out / upsample)) + 2 + (scalars ? 5 : 0);
 }
 
-FieldShare readFieldShare(const Plan& plan, int rank, int ranks, const std::string& whole)
+FieldShare readFieldShare(const Plan& plan, int rank, int ranks, const std::string& whole, int extra)
 {
     const Recipe& r = plan.recipe;
     FieldShare s;
@@ -239,7 +239,7 @@ FieldShare readFieldShare(const Plan& plan, int rank, int ranks, const std::stri
         s.wholeReason = whole.empty() ? wholeReadReason(r, velName) : whole;
         if (s.wholeReason.empty()) {
             s.partial = true;
-            readPart(plan, rank, ranks, velName, s);
+            readPart(plan, rank, ranks, velName, extra, s);
             return s;
         }
     }

@@ -53,10 +53,11 @@ int fieldMargin(const Plan& plan, int upsample, int stride);
 
 /// Read the field and make the domain, the brick layout and the share of `rank` out of `ranks`.
 /// With `ranks` > 1 and a field that allows it, only the part is read and `field` is left for
-/// makeField(). `whole`: a reason to read the whole field on every rank anyway (a distributed
-/// unsteady sequence's). Local to this process (no communication).
+/// makeField(). `whole`: a reason to read the whole field on every rank anyway; `extra`: field
+/// voxels added to a part's margin (an unsteady sequence's texture reaches further). Local to
+/// this process (no communication).
 /// @throw lic::InputError for a bad field (see loadField()).
-FieldShare readFieldShare(const Plan& plan, int rank, int ranks, const std::string& whole = "");
+FieldShare readFieldShare(const Plan& plan, int rank, int ranks, const std::string& whole = "", int extra = 0);
 
 /// The VelocityField of a part, once the ranks agreed on the whole field's largest speed.
 /// @throw lic::InputError for NaN or infinite values in the part.

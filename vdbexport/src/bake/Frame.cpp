@@ -139,10 +139,23 @@ void FrameBake::read(const FrameOptions& options)
     // them (all of them in one process; in a distributed bake only the part of the field they
     // need, where the format allows: see bake/FieldShare.h).
     const auto t0 = Clock::now();
-    share = mJob.stage("reading the field",
-                       [&] { return readFieldShare(mPlan, mJob.rank(), mJob.size(), options.wholeField); });
+    partMargin = options.partMarginGuess;
+    auto readShare = [&] {
+        return mJob.stage("reading the field", [&] {
+            return readFieldShare(mPlan, mJob.rank(), mJob.size(), options.wholeField, partMargin);
+        });
+    };
+    share = readShare();
     if (share.partial) {
         const double maxSpeed = mJob.maxAll(share.extent.maxSpeed, "reading the field");
+        if (options.partMargin) {
+            // The same decision on every rank: it depends on the whole field's largest speed only.
+            const int need = mJob.stage("reading the field", [&] { return options.partMargin(share, maxSpeed); });
+            if (need > partMargin) {
+                partMargin = need;
+                share = readShare();
+            }
+        }
         mJob.stage("reading the field", [&] { makeField(share, maxSpeed); });
     }
     if (mJob.distributed()) {

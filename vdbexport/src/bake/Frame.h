@@ -58,6 +58,11 @@ struct FrameOptions
     std::function<double(const FieldShare&)> velocityScale;
     /// Distributed: why every rank reads the whole field ("" = a part where the format allows).
     std::string wholeField;
+    /// Distributed, a part read: field voxels to add to the part's margin, first a guess, then
+    /// `partMargin(share, maxSpeed)` once the whole field's largest speed is known; the part is
+    /// read again with that margin if the guess was short.
+    int partMarginGuess = 0;
+    std::function<int(const FieldShare&, double maxSpeed)> partMargin;
 };
 
 /// One frame baked up to its composited grids (call compositor->frame(f) to get them). Not
@@ -81,6 +86,7 @@ public:
     std::optional<lic::Compositor> compositor;
     lic::LicStats stats;                         ///< of the convolution of this share
     std::uint64_t shareVoxels = 0;               ///< active output voxels of this share
+    int partMargin = 0;                          ///< field voxels added to the part's margin
     /// Seconds of the stages (read: from construction; input: ranges and texture).
     struct Times
     {

@@ -146,13 +146,14 @@ std::vector<std::uint32_t> listOf(const std::vector<std::uint8_t>& mark)
 /// The texture carried from frame to frame: noise advected (Lagrangian–Eulerian) or a flock of
 /// spots moving with the flow. Frame one is made as a still bake's.
 ///
-/// Distributed (docs/distributed.md): every rank reads each frame's field whole. The spots (a few
-/// per spacing³) are held and moved by every rank alike, and each rank keeps those that reach its
+/// Distributed (docs/distributed.md): the spots (a few per spacing³) are held and moved by every
+/// rank alike (each frame's field is read whole), and each rank keeps those that reach its
 /// bricks. The noise state (16 bytes per output voxel) is held in parts: each rank keeps the
 /// blocks its bricks and their ghost margins read; before advancing, it receives from the ranks
 /// that owned them in the previous frame the blocks it reaches back to that it does not hold
 /// (the previous frame's bricks' owners send; the margin is one block plus the frame's largest
-/// displacement), so only the margins travel.
+/// displacement), so only the margins travel; the field is read in parts, their margin grown by
+/// what the advance reaches.
 class CarriedTexture
 {
 public:
@@ -321,6 +322,12 @@ struct SequenceState
     std::vector<std::string> paths;
     nlohmann::json perFrame = nlohmann::json::array(), firstGrids, spotsJson = nullptr, colorJson = nullptr;
     double sumRead = 0, sumInput = 0, sumConvolve = 0, sumCompose = 0, sumWrite = 0, sumGather = 0;
+    // Distributed: the part's extra margin (field voxels, the largest so far), the last frame's
+    // read, the most field voxels held in one frame.
+    int partMargin = 0;
+    bool partial = false;
+    std::string wholeReason;
+    std::uint64_t fieldHeld = 0;
 };
 
 /// Stage frame `number`'s grids: in one process directly; distributed, rank 0 adds every other
@@ -374,7 +381,20 @@ void bakeFrame(SequenceState& seq, int k, FrameProgress& progress)
     const Plan plan = seq.job.stage("planning the bake", [&] { return makePlan(fr); });
 
     FrameOptions options;
-    if (seq.job.distributed()) options.wholeField = "an unsteady sequence reads each frame whole on every rank";
+    if (seq.job.distributed() && plan.spots) {
+        options.wholeField = "an unsteady spot sequence moves every spot on every rank, so each frame is read whole";
+    } else if (seq.job.distributed() && k > 0) {
+        // The carried noise's advance reads the field around its kept blocks' neighbours (up to
+        // 17 output voxels past the ghost margin: block rounding twice and the refresh test) and
+        // half a frame's displacement further (the midpoint of its back-trace).
+        options.partMarginGuess = seq.partMargin > 0 ? seq.partMargin + 1 : 0;
+        options.partMargin = [&](const FieldShare& share, double maxSpeed) {
+            std::string unit;
+            const double dt = worldPerSecond(*share.loaded.velocity, unit) / recipe.field.fps;
+            const double displacement = std::sqrt(3.0) * maxSpeed * std::abs(dt) / share.domain->voxelSize();
+            return int(std::ceil((17.0 + 0.5 * displacement) / double(recipe.output.upsample))) + 1;
+        };
+    }
     if (k > 0) options.ranges = &seq.ranges; // automatic ranges from the first frame, kept for all
     options.onField = [&](const FieldShare& share) {
         if (k == 0) {
@@ -393,6 +413,10 @@ void bakeFrame(SequenceState& seq, int k, FrameProgress& progress)
     };
     FrameBake fb(plan, seq.job, progress, std::move(options));
     if (k == 0) seq.ranges = fb.ranges;
+    seq.partMargin = std::max(seq.partMargin, fb.partMargin);
+    seq.partial = fb.share.partial;
+    seq.wholeReason = fb.share.wholeReason;
+    seq.fieldHeld = std::max(seq.fieldHeld, fb.share.voxelsHeld);
 
     // Stage the frame.
     const auto tw = Clock::now();
@@ -498,13 +522,14 @@ nlohmann::json bakeSequence(const Recipe& request, lic::Progress& outer)
         const nlohmann::json mine = {{"rank", job.rank()},
                                      {"texture_blocks_held", seq.texture.heldBlocks()},
                                      {"texture_bytes_received", seq.texture.receivedBytes()},
+                                     {"field_voxels_held", seq.fieldHeld},
                                      {"gather_seconds", seq.sumGather},
                                      {"peak_rss_mib", double(u.ru_maxrss) / 1024.0}};
         nlohmann::json ranks = nlohmann::json::array();
         for (const std::string& text : job.allGather(mine.dump(), "summarising")) ranks.push_back(nlohmann::json::parse(text));
         summary["mpi"] = {{"ranks", job.size()},
-                          {"partial_read", false},
-                          {"whole_read_reason", "an unsteady sequence reads each frame whole on every rank"},
+                          {"partial_read", seq.partial},
+                          {"whole_read_reason", seq.partial ? nlohmann::json(nullptr) : nlohmann::json(seq.wholeReason)},
                           {"assignment", "each frame's bricks in contiguous Morton runs, balanced by active voxels"}};
         summary["ranks"] = ranks;
     }
