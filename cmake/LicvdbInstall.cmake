@@ -1,6 +1,7 @@
 # Install rules and packaging: `cmake --install build --prefix P` and `cpack -G DEB` (in build/).
 #
 #   P/bin/licvdb                              the command-line tool
+#   P/libexec/licvdb/licvdb-readcheck         the child of every .vdb read (found relative to licvdb)
 #   P/share/licvdb/ocio/                      the raycaster's OCIO config (found relative to the binary)
 #   P/share/licvdb/blender/*.zip              the Blender add-on (scripts/package-addon)
 #   P/include/lic, P/include/vdbexport        public headers
@@ -15,6 +16,8 @@ set(LICVDB_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/licvdb)
 
 # --- runtime --------------------------------------------------------------------------------
 install(TARGETS licvdb RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR} COMPONENT runtime)
+# The child of every .vdb read, found by licvdb in its ../libexec/licvdb/ (VdbCheck.h).
+install(TARGETS licvdb-readcheck RUNTIME DESTINATION ${CMAKE_INSTALL_LIBEXECDIR}/licvdb COMPONENT runtime)
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/share/ocio/ DESTINATION ${CMAKE_INSTALL_DATADIR}/licvdb/ocio
         COMPONENT runtime)
 # The add-on zips, made at build time (scripts/package-addon) so that install only copies.

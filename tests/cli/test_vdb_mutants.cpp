@@ -100,6 +100,32 @@ TEST_F(VdbMutantsTest, InfoCheckExitsZeroForIntactFilesAndTwoWithTheReasonOtherw
     EXPECT_FALSE(fs::exists(w / "x.png"));
 }
 
+// The child licvdb starts for every .vdb read (licvdb-readcheck, beside licvdb): exit 0 for an
+// intact file, 2 with the same reason `licvdb info --check` gives for a corrupt one.
+TEST_F(VdbMutantsTest, TheReadCheckChildRefusesWhatInfoCheckRefuses)
+{
+    const fs::path w = work();
+    const auto samples = vdb_samples::writeVdbSamples(w, 16);
+    const std::string helper = (fs::path(LICVDB_EXE).parent_path() / "licvdb-readcheck").string();
+    ASSERT_TRUE(fs::exists(helper)) << helper;
+    const std::string bytes = readText(samples[0]);
+    writeBytes(w / "cut.vdb", bytes.substr(0, bytes.size() / 2));
+    const RunResult ok = runCommand(cli_test::shellQuote(helper) + " -- " + cli_test::shellQuote(samples[0]));
+    EXPECT_EQ(ok.code, 0) << ok.describe();
+    const RunResult bad = runCommand(cli_test::shellQuote(helper) + " -- " + cli_test::shellQuote((w / "cut.vdb").string()));
+    EXPECT_EQ(bad.code, 2) << bad.describe();
+    const std::string prefix = "licvdb-readcheck: error: ";
+    ASSERT_EQ(bad.err.rfind(prefix, 0), 0u) << bad.describe();
+    const std::string reason = bad.err.substr(prefix.size(), bad.err.find('\n') - prefix.size());
+    EXPECT_NE(reason.find("is truncated or corrupt"), std::string::npos) << bad.describe();
+    const RunResult info = run({"info", "--check", (w / "cut.vdb").string()});
+    EXPECT_EQ(info.code, 2) << info.describe();
+    EXPECT_NE(info.err.find(reason), std::string::npos) << info.describe();
+    const RunResult usage = runCommand(cli_test::shellQuote(helper));
+    EXPECT_EQ(usage.code, 2) << usage.describe();
+    EXPECT_NE(usage.err.find("usage: licvdb-readcheck -- FILE.vdb"), std::string::npos) << usage.describe();
+}
+
 // Mutants of three files (our field, a mantaflow-style half-float zip cache, a real bake): every
 // `info --check` and every `bake` exits 0 or 2, and a refused bake writes nothing. Hang guard, safe
 // on a busy machine (an ASan build beside other jobs once took 12 s of wall time for an intact

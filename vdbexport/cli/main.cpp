@@ -72,8 +72,12 @@ int runCommand(const Registered& r, Context& context)
 
 int main(int argc, char** argv)
 {
-    // Layer 2 of the .vdb read defences: every read first runs in a child `licvdb info --check`.
-    if (!inReadChild()) vdbexport::setReadIsolation(selfExecutable());
+    // Layer 2 of the .vdb read defences: every read first runs in a child `licvdb info --check`
+    // (for a .vdb, licvdb-readcheck where it is installed: it starts faster than licvdb).
+    if (!inReadChild()) {
+        const std::string self = selfExecutable();
+        vdbexport::setReadIsolation(self, vdbexport::findVdbReadHelper(self));
+    }
 
     CLI::App app{"licvdb: 3D line integral convolution of vector fields, baked into OpenVDB volumes"};
     app.require_subcommand(1);

@@ -372,7 +372,10 @@ void bakeFrame(SequenceState& seq, int k, FrameProgress& progress)
     const Recipe& recipe = seq.recipe;
     const int number = seq.frames.numbers[std::size_t(k)], count = int(seq.frames.numbers.size());
     progress.setFrame(number, k + 1, count);
-    if (progress.wasInterrupted()) throw lic::Cancelled();
+    // Distributed, every rank leaves together when one was interrupted.
+    seq.job.stage("starting a frame", [&] {
+        if (progress.wasInterrupted()) throw lic::Cancelled();
+    });
     const auto tf = Clock::now();
     Recipe fr = recipe;
     fr.field.path = seq.frames.paths[std::size_t(k)];
@@ -477,7 +480,9 @@ nlohmann::json bakeSequence(const Recipe& request, lic::Progress& outer)
     for (int k = 0; k < count; ++k) bakeFrame(seq, k, progress);
 
     // One manifest for the sequence, then every file at once.
-    if (outer.wasInterrupted()) throw lic::Cancelled();
+    job.stage("writing", [&] {
+        if (outer.wasInterrupted()) throw lic::Cancelled();
+    });
     nlohmann::json fieldFiles = nlohmann::json::array();
     for (const auto& p : frames.paths) fieldFiles.push_back(fs::path(p).filename().string());
     auto manifest = [&] {

@@ -1,6 +1,6 @@
 // checkInIsolatedProcess(): layer 2 of the read defences (docs/inputs.md). A child process
-// (`licvdb info --check FILE`, with LICVDB_READ_CHILD=1 so that it reads in-process) reads every
-// grid with OpenVDB; whatever a file does to that reader (a crash, memory corruption, a hang) stays
+// (`licvdb-readcheck -- FILE` where it is installed, else `licvdb info --check FILE` with
+// LICVDB_READ_CHILD=1 so that it reads in-process) reads every grid with OpenVDB; whatever a file does to that reader (a crash, memory corruption, a hang) stays
 // in the child, which is killed after a time limit.
 #include "vdbexport/io/VdbCheck.h"
 
@@ -11,6 +11,7 @@
 #include <csignal>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <mutex>
 #include <string>
 #include <sys/stat.h>
@@ -30,7 +31,7 @@ namespace vdbexport {
 namespace {
 
 std::mutex sExeMutex;
-std::string sExecutable;
+std::string sExecutable, sVdbHelper;
 
 std::string quote(const std::string& s) { return "'" + s + "'"; }
 
@@ -46,10 +47,20 @@ std::string childReason(const std::string& err)
 
 } // namespace
 
-void setReadIsolation(const std::string& executable)
+void setReadIsolation(const std::string& executable, const std::string& vdbHelper)
 {
     const std::lock_guard<std::mutex> lock(sExeMutex);
     sExecutable = executable;
+    sVdbHelper = executable.empty() ? std::string() : vdbHelper;
+}
+
+std::string findVdbReadHelper(const std::string& executable)
+{
+    if (executable.empty()) return "";
+    const std::filesystem::path dir = std::filesystem::path(executable).parent_path();
+    for (const std::filesystem::path& p : {dir / "licvdb-readcheck", dir / ".." / "libexec" / "licvdb" / "licvdb-readcheck"})
+        if (::access(p.c_str(), X_OK) == 0) return p.lexically_normal().string();
+    return "";
 }
 
 std::string readIsolationExecutable()
@@ -68,10 +79,22 @@ double readTimeoutSeconds(uint64_t fileBytes)
     return 20.0 + double(fileBytes) / 10e6;
 }
 
+namespace {
+void runIsolated(const std::string& exe, const std::string& path, const std::vector<std::string>& args,
+                 const std::string& reader, const std::string& expected);
+} // namespace
+
 void checkInIsolatedProcess(const std::string& path)
 {
-    checkReadInIsolatedProcess(path, {"info", "--check", "--quiet", "--", path}, "OpenVDB's reader",
-                               "an intact OpenVDB .vdb file");
+    std::string exe, helper;
+    {
+        const std::lock_guard<std::mutex> lock(sExeMutex);
+        exe = sExecutable;
+        helper = sVdbHelper;
+    }
+    if (exe.empty()) return;
+    if (!helper.empty()) runIsolated(helper, path, {"--", path}, "OpenVDB's reader", "an intact OpenVDB .vdb file");
+    else runIsolated(exe, path, {"info", "--check", "--quiet", "--", path}, "OpenVDB's reader", "an intact OpenVDB .vdb file");
 }
 
 void checkReadInIsolatedProcess(const std::string& path, const std::vector<std::string>& args, const std::string& reader,
@@ -79,6 +102,14 @@ void checkReadInIsolatedProcess(const std::string& path, const std::vector<std::
 {
     const std::string exe = readIsolationExecutable();
     if (exe.empty()) return;
+    runIsolated(exe, path, args, reader, expected);
+}
+
+namespace {
+
+void runIsolated(const std::string& exe, const std::string& path, const std::vector<std::string>& args,
+                 const std::string& reader, const std::string& expected)
+{
     struct stat st{};
     const uint64_t bytes = ::stat(path.c_str(), &st) == 0 ? uint64_t(st.st_size) : 0;
     const double limit = readTimeoutSeconds(bytes);
@@ -169,5 +200,7 @@ void checkReadInIsolatedProcess(const std::string& path, const std::vector<std::
     throw lic::Error("checking " + quote(path) + " in a child process failed (exit " + std::to_string(code)
                      + "): " + childReason(err));
 }
+
+} // namespace
 
 } // namespace vdbexport

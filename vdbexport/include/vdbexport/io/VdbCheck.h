@@ -78,8 +78,8 @@ VdbCheckResult checkVdbStructure(const std::string& path);
 ///        limit) if neither is known.
 uint64_t readMemoryLimitBytes();
 
-/// @brief Layer 2: read every grid of `path` with OpenVDB in a separate process (`licvdb info
-///        --check`, see setReadIsolation), so that a file that crashes or hangs OpenVDB takes down
+/// @brief Layer 2: read every grid of `path` with OpenVDB in a separate process (`licvdb-readcheck`
+///        or `licvdb info --check`, see setReadIsolation), so that a file that crashes or hangs OpenVDB takes down
 ///        only that process. Does nothing while no executable is set (library use, the child).
 /// Waits at most readTimeoutSeconds(file size), then kills the child.
 /// @throw lic::InputError if the child reports the file corrupt (its reason), is killed by a
@@ -96,7 +96,14 @@ void checkReadInIsolatedProcess(const std::string& path, const std::vector<std::
 
 /// @brief Set the executable that checkInIsolatedProcess runs (`licvdb`); empty turns layer 2 off.
 /// `licvdb` sets itself at start-up, except in the child (environment LICVDB_READ_CHILD=1).
-void setReadIsolation(const std::string& executable);
+/// `vdbHelper`: a program that checks a .vdb as `licvdb info --check` does in the child, run as
+/// `HELPER -- FILE` (`licvdb-readcheck`, which starts in a fraction of licvdb's time); "" = use
+/// `executable` for .vdb files too.
+void setReadIsolation(const std::string& executable, const std::string& vdbHelper = "");
+
+/// `licvdb-readcheck` installed beside `executable` (the build tree, or the same bin directory)
+/// or in its ../libexec/licvdb/ (an installed licvdb); "" if there is none.
+std::string findVdbReadHelper(const std::string& executable);
 
 /// The executable set by setReadIsolation ("" if none).
 std::string readIsolationExecutable();

@@ -1,0 +1,44 @@
+// licvdb-readcheck: layer 2 of the .vdb read defences (docs/inputs.md) as a program of its own.
+// `licvdb-readcheck -- FILE` runs layer 1 (the structural walk) and then reads and describes every
+// grid with OpenVDB, in this process: it is what `licvdb` starts as the child of every .vdb read,
+// so that whatever a file does to OpenVDB's reader (a crash, a hang) stays out of the bake. It
+// links OpenVDB and its own read code only, so it starts in a fraction of the time `licvdb`
+// (with OpenImageIO, OpenColorIO, VTK and MPI) takes. Exit 0: intact; 2: refused, with
+// "licvdb-readcheck: error: REASON" on stderr; 1: another failure.
+#include "vdbexport/io/Info.h"
+#include "vdbexport/io/VdbCheck.h"
+#include "vdbexport/io/VdbIO.h"
+
+#include "lic/util/Error.h"
+
+#include <openvdb/openvdb.h>
+
+#include <cstring>
+#include <iostream>
+#include <new>
+#include <string>
+
+int main(int argc, char** argv)
+{
+    const char* who = "licvdb-readcheck";
+    if (argc != 3 || std::strcmp(argv[1], "--") != 0) {
+        std::cerr << who << ": error: usage: licvdb-readcheck -- FILE.vdb\n";
+        return 2;
+    }
+    const std::string path = argv[2];
+    try {
+        openvdb::initialize();
+        (void)vdbexport::detail::checkedVdb(path);
+        (void)vdbexport::describeVdb(path);
+        return 0;
+    } catch (const lic::InputError& e) {
+        std::cerr << who << ": error: " << e.what() << "\n";
+        return 2;
+    } catch (const std::bad_alloc&) {
+        std::cerr << who << ": error: out of memory\n";
+        return 1;
+    } catch (const std::exception& e) {
+        std::cerr << who << ": error: " << e.what() << "\n";
+        return 1;
+    }
+}
