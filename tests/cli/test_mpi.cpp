@@ -455,6 +455,7 @@ TEST_F(MpiBake, AnUnsteadySequenceOfNoiseIsIdenticalToOneProcessInEveryFrame)
     std::uint64_t received = 0;
     for (const json& rank : s3["ranks"]) {
         EXPECT_LT(rank["texture_blocks_held"].get<std::uint64_t>(), blocks) << r3.out;
+        EXPECT_GT(rank["cpu_seconds"].get<double>(), 0.0) << r3.out;
         received += rank["texture_bytes_received"].get<std::uint64_t>();
     }
     EXPECT_GT(received, 0u) << r3.out;

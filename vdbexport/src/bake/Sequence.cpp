@@ -529,7 +529,9 @@ nlohmann::json bakeSequence(const Recipe& request, lic::Progress& outer)
                                      {"texture_bytes_received", seq.texture.receivedBytes()},
                                      {"field_voxels_held", seq.fieldHeld},
                                      {"gather_seconds", seq.sumGather},
-                                     {"peak_rss_mib", double(u.ru_maxrss) / 1024.0}};
+                                     {"peak_rss_mib", double(u.ru_maxrss) / 1024.0},
+                                     {"cpu_seconds", double(u.ru_utime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec) +
+                                                         double(u.ru_stime.tv_sec) + 1e-6 * double(u.ru_stime.tv_usec)}};
         nlohmann::json ranks = nlohmann::json::array();
         for (const std::string& text : job.allGather(mine.dump(), "summarising")) ranks.push_back(nlohmann::json::parse(text));
         summary["mpi"] = {{"ranks", job.size()},
