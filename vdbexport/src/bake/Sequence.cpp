@@ -171,15 +171,16 @@ private:
     Input noise(int k, double dt, const Plan& plan, const FieldShare& share, lic::ScalarSet& scalars);
     Input spots(int k, double dt, const Plan& plan, const FieldShare& share, lic::ScalarSet& scalars);
     /// Distributed noise: receive the previous frame's blocks this rank's part of frame k reads.
-    void importMargins(const FieldShare& share, double dt, const std::vector<std::vector<std::uint8_t>>& keep);
+    void importMargins(const FieldShare& share, double dt, const std::vector<std::vector<std::uint32_t>>& keep);
 
     const Recipe& mRecipe;
     Job& mJob;
     lic::AdvectedNoise mNoise;
     std::optional<lic::SpotFlock> mFlock;
     nlohmann::json mCounters;
-    // Distributed noise: per rank, the blocks of the current frame it keeps; this rank's own.
-    std::vector<std::vector<std::uint8_t>> mKeep;
+    // Distributed noise: per rank, the blocks of the current frame it keeps (ascending); this
+    // rank's own (a mark per block).
+    std::vector<std::vector<std::uint32_t>> mKeep;
     std::vector<std::uint8_t> mOwn;
     std::size_t mHeldBlocks = 0;
     std::uint64_t mReceived = 0;
@@ -190,7 +191,7 @@ Input CarriedTexture::next(int k, double dt, const Plan& plan, const FieldShare&
     return plan.spots ? spots(k, dt, plan, share, scalars) : noise(k, dt, plan, share, scalars);
 }
 
-void CarriedTexture::importMargins(const FieldShare& share, double dt, const std::vector<std::vector<std::uint8_t>>& keep)
+void CarriedTexture::importMargins(const FieldShare& share, double dt, const std::vector<std::vector<std::uint32_t>>& keep)
 {
     const lic::OutputDomain& prev = *mNoise.domain();
     const lic::OutputDomain& domain = *share.domain;
@@ -200,9 +201,10 @@ void CarriedTexture::importMargins(const FieldShare& share, double dt, const std
     std::vector<std::string> out(std::size_t(mJob.size()));
     for (int q = 0; q < mJob.size(); ++q) {
         if (q == mJob.rank()) continue;
+        const std::vector<std::uint32_t>& had = mKeep[std::size_t(q)];
         std::vector<std::uint32_t> send;
-        for (std::uint32_t b : lic::AdvectedNoise::sourceBlocks(prev, domain, listOf(keep[std::size_t(q)]), displacement))
-            if (mOwn[b] && !mKeep[std::size_t(q)][b]) send.push_back(b);
+        for (std::uint32_t b : lic::AdvectedNoise::sourceBlocks(prev, domain, keep[std::size_t(q)], displacement))
+            if (mOwn[b] && !std::binary_search(had.begin(), had.end(), b)) send.push_back(b);
         out[std::size_t(q)] = mNoise.pack(send);
     }
     const std::vector<std::string> in = mJob.exchange(std::move(out), "exchanging the texture's margins");
@@ -217,15 +219,15 @@ Input CarriedTexture::noise(int k, double dt, const Plan& plan, const FieldShare
 {
     const lic::OutputDomain& domain = *share.domain;
     std::optional<lic::AdvectedNoise::Part> part;
-    std::vector<std::vector<std::uint8_t>> keep;
+    std::vector<std::vector<std::uint32_t>> keep;
     if (mJob.distributed()) {
         // Every rank's part of this frame: the blocks its bricks' noise reads (the ghost margin and
         // the filter's two voxels), and its own blocks.
         const int reach = lic::ghostMargin(plan.settings) + 2;
         for (int q = 0; q < mJob.size(); ++q)
-            keep.push_back(blocksNearBricks(domain, *share.layout, bricksOf(share.assignment, q), reach));
+            keep.push_back(listOf(blocksNearBricks(domain, *share.layout, bricksOf(share.assignment, q), reach)));
         part.emplace();
-        part->keep = listOf(keep[std::size_t(mJob.rank())]);
+        part->keep = keep[std::size_t(mJob.rank())];
         for (std::size_t id : share.mine)
             part->own.insert(part->own.end(), (*share.layout)[id].blocks.begin(), (*share.layout)[id].blocks.end());
         std::sort(part->own.begin(), part->own.end());
