@@ -21,6 +21,25 @@ OutputDomain::OutputDomain(const openvdb::math::Transform& fieldTransform, const
     init(fieldTransform, fieldActiveBox, activity);
 }
 
+void OutputDomain::markBlocks(const openvdb::CoordBBox& box, std::vector<std::uint8_t>& mark) const
+{
+    if (box.empty()) return;
+    for (int x = box.min()[0] >> kLog2Block; x <= box.max()[0] >> kLog2Block; ++x)
+        for (int y = box.min()[1] >> kLog2Block; y <= box.max()[1] >> kLog2Block; ++y)
+            for (int z = box.min()[2] >> kLog2Block; z <= box.max()[2] >> kLog2Block; ++z) {
+                const std::int64_t b = blockOf(openvdb::Coord(x << kLog2Block, y << kLog2Block, z << kLog2Block));
+                if (b >= 0) mark[std::size_t(b)] = 1;
+            }
+}
+
+std::vector<std::uint32_t> OutputDomain::markedBlocks(const std::vector<std::uint8_t>& mark)
+{
+    std::vector<std::uint32_t> out;
+    for (std::size_t b = 0; b < mark.size(); ++b)
+        if (mark[b]) out.push_back(std::uint32_t(b));
+    return out;
+}
+
 template<typename GridT>
 void OutputDomain::init(const openvdb::math::Transform& fieldTransform, const openvdb::CoordBBox& fb,
                         const GridT& grid)

@@ -101,22 +101,13 @@ std::vector<std::uint32_t> allBlocks(const OutputDomain& domain)
 std::vector<std::uint32_t> blocksNear(const OutputDomain& domain, const OutputDomain& from,
                                       const std::vector<std::uint32_t>& blocks, int reach)
 {
-    constexpr int B = OutputDomain::kBlockDim;
     std::vector<std::uint8_t> mark(domain.blockCount(), 0);
     for (std::uint32_t b : blocks) {
-        const openvdb::Coord lo = from.blockOrigin(b) - openvdb::Coord(reach);
-        const openvdb::Coord hi = from.blockOrigin(b) + openvdb::Coord(B - 1 + reach);
-        for (int x = detail::floorDiv(lo[0], B); x <= detail::floorDiv(hi[0], B); ++x)
-            for (int y = detail::floorDiv(lo[1], B); y <= detail::floorDiv(hi[1], B); ++y)
-                for (int z = detail::floorDiv(lo[2], B); z <= detail::floorDiv(hi[2], B); ++z) {
-                    const std::int64_t n = domain.blockOf(openvdb::Coord(x * B, y * B, z * B));
-                    if (n >= 0) mark[std::size_t(n)] = 1;
-                }
+        const openvdb::Coord o = from.blockOrigin(b);
+        domain.markBlocks(openvdb::CoordBBox(o - openvdb::Coord(reach), o + openvdb::Coord(OutputDomain::kBlockDim - 1 + reach)),
+                          mark);
     }
-    std::vector<std::uint32_t> out;
-    for (std::size_t b = 0; b < mark.size(); ++b)
-        if (mark[b]) out.push_back(std::uint32_t(b));
-    return out;
+    return OutputDomain::markedBlocks(mark);
 }
 
 std::string voxelName(const openvdb::Coord& c)
@@ -223,42 +214,53 @@ void AdvectedNoise::advance(const OutputDomain& domain, const VelocityField& fie
         }
     });
     // Pass 2 over the kept blocks: refresh where the carried coordinates no longer step by about
-    // one voxel per voxel; keep the result.
+    // one voxel per voxel (read-only: a neighbour's test sees the unrefreshed state).
     auto nearSlot = [&](std::int64_t slot) {
         const std::int32_t l = nearLocal[std::size_t(slot / V)];
         if (l < 0) throw Error("internal error: carried noise: a neighbour's block was not computed");
         return std::size_t(l) * V + std::size_t(slot % V);
     };
-    std::vector<openvdb::Vec3f> KX(keep.size() * V, openvdb::Vec3f(0.0f));
-    std::vector<std::uint32_t> KG(keep.size() * V, 0);
     std::vector<std::uint8_t> state(keep.size() * V, 0); // how, or 3: refreshed
     tbb::parallel_for(std::size_t(0), keep.size(), [&](std::size_t i) {
         const std::size_t b = keep[i];
         for (int off = 0; off < V; ++off) {
             if (!domain.blockMask(b).isOn(openvdb::Index(off))) continue;
-            const std::size_t k = i * V + std::size_t(off), s = nearSlot(std::int64_t(b * V) + off);
+            const std::size_t s = nearSlot(std::int64_t(b * V) + off);
             const openvdb::Coord ijk = domain.coordOf(b * V + std::size_t(off));
             bool refresh = false;
-            if (how[s] == 1) {
-                for (int a = 0; a < 3 && !refresh; ++a) {
-                    openvdb::Coord n = ijk;
-                    n[a] += 1;
-                    const std::int64_t ns = domain.slotOf(n);
-                    if (ns < 0) continue;
-                    const std::size_t t = nearSlot(ns);
-                    if (G[t] != G[s]) continue;
-                    const float d = (X[t] - X[s]).length();
-                    refresh = d < 0.5f || d > 2.0f;
-                }
+            for (int a = 0; a < 3 && how[s] == 1 && !refresh; ++a) {
+                openvdb::Coord n = ijk;
+                n[a] += 1;
+                const std::int64_t ns = domain.slotOf(n);
+                if (ns < 0) continue;
+                const std::size_t t = nearSlot(ns);
+                if (G[t] != G[s]) continue;
+                const float d = (X[t] - X[s]).length();
+                refresh = d < 0.5f || d > 2.0f;
             }
-            KX[k] = refresh ? ijk.asVec3s() : X[s];
-            KG[k] = refresh ? gen : G[s];
-            state[k] = refresh ? 3 : how[s];
+            state[i * V + std::size_t(off)] = refresh ? 3 : how[s];
+        }
+    });
+    // Pass 3: the kept blocks' state. In place where every computed block is kept (one process:
+    // no second copy of the arrays); a part copies its kept blocks out of the computed ones.
+    const bool inPlace = near.size() == keep.size(); // near ⊇ keep
+    std::vector<openvdb::Vec3f> KX;
+    std::vector<std::uint32_t> KG;
+    if (!inPlace) KX.assign(keep.size() * V, openvdb::Vec3f(0.0f)), KG.assign(keep.size() * V, 0);
+    tbb::parallel_for(std::size_t(0), keep.size(), [&](std::size_t i) {
+        const std::size_t b = keep[i];
+        for (int off = 0; off < V; ++off) {
+            const std::size_t k = i * V + std::size_t(off), s = inPlace ? k : nearSlot(std::int64_t(b * V) + off);
+            const bool refresh = state[k] == 3;
+            openvdb::Vec3f& x = inPlace ? X[s] : KX[k];
+            std::uint32_t& g = inPlace ? G[s] : KG[k];
+            x = refresh ? domain.coordOf(b * V + std::size_t(off)).asVec3s() : X[s];
+            g = refresh ? gen : G[s];
         }
     });
     hold(domain, keep);
-    mX.swap(KX);
-    mGen.swap(KG);
+    mX.swap(inPlace ? X : KX);
+    mGen.swap(inPlace ? G : KG);
     Stats st;
     auto count = [&](std::uint32_t b) {
         const std::size_t i = std::size_t(mLocal[b]);

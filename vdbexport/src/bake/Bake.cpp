@@ -16,7 +16,6 @@
 
 #include <openvdb/openvdb.h>
 
-#include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -28,24 +27,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); }
-
-/// Peak resident memory of this process so far, MiB (Linux: ru_maxrss is in KiB).
-double peakRssMiB()
-{
-    rusage u{};
-    getrusage(RUSAGE_SELF, &u);
-    return double(u.ru_maxrss) / 1024.0;
-}
-
-/// CPU time of this process so far (user + system, every thread), seconds: with the wall times,
-/// how much of a core a process had (a shared machine gives less than its threads ask for).
-double cpuSeconds()
-{
-    rusage u{};
-    getrusage(RUSAGE_SELF, &u);
-    auto s = [](const timeval& t) { return double(t.tv_sec) + 1e-6 * double(t.tv_usec); };
-    return s(u.ru_utime) + s(u.ru_stime);
-}
 
 std::string hostName()
 {
@@ -123,7 +104,7 @@ nlohmann::json summarise(const Recipe& recipe, const Plan& plan, const FrameBake
         {"rank", job.rank()}, {"host", hostName()}, {"bricks", fb.mine().size()},
         {"active_voxels", job.distributed() ? fb.shareVoxels : st.voxels}, {"field_voxels_held", fb.share.voxelsHeld},
         {"streamlines", st.streamlines}, {"samples", st.samples}, {"deposits", st.deposits},
-        {"peak_rss_mib", peakRssMiB()}, {"cpu_seconds", cpuSeconds()}, {"seconds", seconds}};
+        {"peak_rss_mib", pipeline::peakRssMiB()}, {"cpu_seconds", pipeline::cpuSeconds()}, {"seconds", seconds}};
     rankJson["seconds"]["gather"] = tGather;
     std::uint64_t streamlines = st.streamlines, samples = st.samples, deposits = st.deposits;
     nlohmann::json ranksJson = nlohmann::json::array();
@@ -160,8 +141,8 @@ nlohmann::json summarise(const Recipe& recipe, const Plan& plan, const FrameBake
         {"density_active_voxels", written.firstGrids.empty() ? 0 : written.firstGrids.front()->activeVoxelCount()},
         {"raw_mean", fb.compositor->rawStats().mean},
         {"raw_stddev", fb.compositor->rawStats().stddev},
-        {"peak_rss_mib", peakRssMiB()},
-        {"cpu_seconds", cpuSeconds()},
+        {"peak_rss_mib", pipeline::peakRssMiB()},
+        {"cpu_seconds", pipeline::cpuSeconds()},
         {"seconds", seconds},
     };
     if (job.distributed()) {

@@ -18,6 +18,7 @@
 #include <numeric>
 
 #include <signal.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 namespace vdbexport {
@@ -542,6 +543,21 @@ std::vector<int> assignBricks(const lic::BrickLayout& layout, int ranks)
         before += w;
     }
     return out;
+}
+
+double peakRssMiB()
+{
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return double(u.ru_maxrss) / 1024.0; // Linux: ru_maxrss is in KiB
+}
+
+double cpuSeconds()
+{
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    auto s = [](const timeval& t) { return double(t.tv_sec) + 1e-6 * double(t.tv_usec); };
+    return s(u.ru_utime) + s(u.ru_stime);
 }
 
 std::vector<std::size_t> bricksOf(const std::vector<int>& assignment, int rank)

@@ -109,6 +109,12 @@ public:
     void disarm();
 };
 
+/// Peak resident memory of this process so far, MiB (a rank's figure in a bake's summary).
+double peakRssMiB();
+/// CPU time of this process so far (user + system, every thread), seconds: with the wall times,
+/// how much of a core a process had (a shared machine gives less than its threads ask for).
+double cpuSeconds();
+
 /// The ids of `layout`'s bricks in Morton (Z-curve) order of their positions: neighbours in the
 /// order are neighbours in space, so a run of the order is a compact region.
 std::vector<std::size_t> mortonOrder(const lic::BrickLayout& layout);

@@ -117,30 +117,13 @@ FieldFrames checkSequence(const Recipe& recipe)
 }
 
 /// The blocks of `domain` with a voxel within `reach` voxels of the boxes of `bricks` (ids in
-/// `layout`), as a mark per block.
-std::vector<std::uint8_t> blocksNearBricks(const lic::OutputDomain& domain, const lic::BrickLayout& layout,
-                                           const std::vector<std::size_t>& bricks, int reach)
+/// `layout`), ascending.
+std::vector<std::uint32_t> blocksNearBricks(const lic::OutputDomain& domain, const lic::BrickLayout& layout,
+                                            const std::vector<std::size_t>& bricks, int reach)
 {
-    constexpr int B = lic::OutputDomain::kBlockDim;
     std::vector<std::uint8_t> mark(domain.blockCount(), 0);
-    for (std::size_t id : bricks) {
-        const openvdb::CoordBBox box = layout[id].box.expandBy(reach);
-        for (int x = lic::detail::floorDiv(box.min()[0], B); x <= lic::detail::floorDiv(box.max()[0], B); ++x)
-            for (int y = lic::detail::floorDiv(box.min()[1], B); y <= lic::detail::floorDiv(box.max()[1], B); ++y)
-                for (int z = lic::detail::floorDiv(box.min()[2], B); z <= lic::detail::floorDiv(box.max()[2], B); ++z) {
-                    const std::int64_t b = domain.blockOf(openvdb::Coord(x * B, y * B, z * B));
-                    if (b >= 0) mark[std::size_t(b)] = 1;
-                }
-    }
-    return mark;
-}
-
-std::vector<std::uint32_t> listOf(const std::vector<std::uint8_t>& mark)
-{
-    std::vector<std::uint32_t> out;
-    for (std::size_t b = 0; b < mark.size(); ++b)
-        if (mark[b]) out.push_back(std::uint32_t(b));
-    return out;
+    for (std::size_t id : bricks) domain.markBlocks(layout[id].box.expandBy(reach), mark);
+    return lic::OutputDomain::markedBlocks(mark);
 }
 
 /// The texture carried from frame to frame: noise advected (Lagrangian–Eulerian) or a flock of
@@ -225,7 +208,7 @@ Input CarriedTexture::noise(int k, double dt, const Plan& plan, const FieldShare
         // the filter's two voxels), and its own blocks.
         const int reach = lic::ghostMargin(plan.settings) + 2;
         for (int q = 0; q < mJob.size(); ++q)
-            keep.push_back(listOf(blocksNearBricks(domain, *share.layout, bricksOf(share.assignment, q), reach)));
+            keep.push_back(blocksNearBricks(domain, *share.layout, bricksOf(share.assignment, q), reach));
         part.emplace();
         part->keep = keep[std::size_t(mJob.rank())];
         for (std::size_t id : share.mine)
@@ -524,16 +507,13 @@ nlohmann::json bakeSequence(const Recipe& request, lic::Progress& outer)
                      {"compose", seq.sumCompose}, {"write", seq.sumWrite}, {"total", total},
                      {"per_frame", total / double(count)}}}};
     if (job.distributed()) {
-        rusage u{};
-        getrusage(RUSAGE_SELF, &u);
         const nlohmann::json mine = {{"rank", job.rank()},
                                      {"texture_blocks_held", seq.texture.heldBlocks()},
                                      {"texture_bytes_received", seq.texture.receivedBytes()},
                                      {"field_voxels_held", seq.fieldHeld},
                                      {"gather_seconds", seq.sumGather},
-                                     {"peak_rss_mib", double(u.ru_maxrss) / 1024.0},
-                                     {"cpu_seconds", double(u.ru_utime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec) +
-                                                         double(u.ru_stime.tv_sec) + 1e-6 * double(u.ru_stime.tv_usec)}};
+                                     {"peak_rss_mib", peakRssMiB()},
+                                     {"cpu_seconds", cpuSeconds()}};
         nlohmann::json ranks = nlohmann::json::array();
         for (const std::string& text : job.allGather(mine.dump(), "summarising")) ranks.push_back(nlohmann::json::parse(text));
         summary["mpi"] = {{"ranks", job.size()},

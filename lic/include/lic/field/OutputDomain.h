@@ -92,6 +92,11 @@ public:
             return -1;
         return mBlockTable[(std::size_t(bx) * mBlockDim[1] + by) * mBlockDim[2] + bz];
     }
+    /// Set mark[b] = 1 for every block b with a voxel in `box` (mark has blockCount() entries).
+    void markBlocks(const openvdb::CoordBBox& box, std::vector<std::uint8_t>& mark) const;
+    /// The indices b with mark[b] != 0, ascending.
+    static std::vector<std::uint32_t> markedBlocks(const std::vector<std::uint8_t>& mark);
+
     /// Nearest output voxel of a continuous output-index position.
     static openvdb::Coord nearestVoxel(const openvdb::Vec3d& p)
     {
