@@ -2,6 +2,7 @@
 #
 #   P/bin/licvdb                              the command-line tool
 #   P/libexec/licvdb/licvdb-readcheck         the child of every .vdb read (found relative to licvdb)
+#   P/libexec/licvdb/licvdb-image.so          the image module: OIIO, OCIO (loaded on first use)
 #   P/share/licvdb/ocio/                      the raycaster's OCIO config (found relative to the binary)
 #   P/share/licvdb/blender/*.zip              the Blender add-on (scripts/package-addon)
 #   P/include/lic, P/include/vdbexport        public headers
@@ -18,6 +19,8 @@ set(LICVDB_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/licvdb)
 install(TARGETS licvdb RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR} COMPONENT runtime)
 # The child of every .vdb read, found by licvdb in its ../libexec/licvdb/ (VdbCheck.h).
 install(TARGETS licvdb-readcheck RUNTIME DESTINATION ${CMAKE_INSTALL_LIBEXECDIR}/licvdb COMPONENT runtime)
+# The image module (OpenImageIO, OpenColorIO), loaded by licvdb from its ../libexec/licvdb/ (ImageIO.h).
+install(TARGETS licvdb-image LIBRARY DESTINATION ${CMAKE_INSTALL_LIBEXECDIR}/licvdb COMPONENT runtime)
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/share/ocio/ DESTINATION ${CMAKE_INSTALL_DATADIR}/licvdb/ocio
         COMPONENT runtime)
 # The add-on zips, made at build time (scripts/package-addon) so that install only copies.
@@ -103,7 +106,7 @@ simulation, an analytic flow) into line integral convolution volumes written
 as OpenVDB grids: dense noise LIC or sparse streamlines with halos, width and
 colour by scalars, looping animations. It includes a reference halo raycaster
 (licvdb render) and the Blender add-on zips in /usr/share/licvdb/blender.")
-# dpkg-shlibdeps finds every shared library the binary links, with versions (libopenvdb10.0,
+# dpkg-shlibdeps finds every shared library the binaries and the image module link, with versions (libopenvdb10.0,
 # libtbb12, libopenimageio2.4, libopencolorio2.1, libimath-3-1-29, libblosc1, libssl3, zlib1g,
 # libopenmpi3, libvtk9.1 with VTK, libstdc++6, libc6: scripts/test-install checks them). licvdb runs nothing else
 # except mpirun for distributed bakes (openmpi-bin, suggested) and Blender for the add-on.
@@ -120,8 +123,8 @@ set(CPACK_DEBIAN_DEVELOPMENT_DESCRIPTION "Development files of licvdb: headers, 
 package. find_package(licvdb) gives lic::lic (fields, streamlines, LIC engines,
 raycaster) and lic::vdbexport (recipes, readers, bakes to .vdb files).")
 # What licvdbConfig.cmake finds: the -dev packages of the public and the (static) private
-# dependencies. libopencv-dev: Debian's OpenImageIO CMake target names /usr/include/opencv4.
-set(_licvdb_dev_depends "licvdb (= ${PROJECT_VERSION}-1), libopenvdb-dev, libtbb-dev, libboost-iostreams-dev, libimath-dev, nlohmann-json3-dev, libopenimageio-dev, openimageio-tools, libopencv-dev, libopencolorio-dev, libssl-dev, zlib1g-dev, libblosc-dev")
+# dependencies (images need none: the image module comes with the licvdb package).
+set(_licvdb_dev_depends "licvdb (= ${PROJECT_VERSION}-1), libopenvdb-dev, libtbb-dev, libboost-iostreams-dev, libimath-dev, nlohmann-json3-dev, libssl-dev, zlib1g-dev, libblosc-dev")
 if(LICVDB_MPI)
   string(APPEND _licvdb_dev_depends ", libopenmpi-dev")
 endif()

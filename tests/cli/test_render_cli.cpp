@@ -226,6 +226,43 @@ TEST_F(RenderCli, BadInputExitsTwoWithAMessageAndNoFile)
     EXPECT_NE(r.err.find("velocity"), std::string::npos) << r.describe();
 }
 
+// OpenImageIO and OpenColorIO are a module licvdb loads on first use (ImageModuleApi.h): licvdb
+// itself does not link them (they cost every start ~0.3 s), a bake runs without the module, and
+// an image command without it fails with one message naming where it looked, exit 1, no file.
+TEST_F(RenderCli, TheImageLibrariesAreLoadedOnlyByImageCommands)
+{
+    const RunResult libs = cli_test::runShell(mDir, sShared / "logs", "ldd " + cli_test::shellQuote(LICVDB_EXE));
+    ASSERT_EQ(libs.code, 0) << libs.describe();
+    EXPECT_NE(libs.out.find("libopenvdb"), std::string::npos) << libs.out;
+    EXPECT_EQ(libs.out.find("libOpenImageIO"), std::string::npos) << libs.out;
+    EXPECT_EQ(libs.out.find("libOpenColorIO"), std::string::npos) << libs.out;
+
+    const auto withModule = [&](const std::string& module, const std::vector<std::string>& args) {
+        return cli_test::runShell(mDir, sShared / "logs",
+                                  "LICVDB_IMAGE_MODULE=" + cli_test::shellQuote(module) + " " + cli_test::licvdbCommand(args));
+    };
+    const std::string missing = (mDir / "nowhere" / "licvdb-image.so").string();
+    RunResult r = withModule(missing, {"render", shared("lic.vdb"), "--out", "o.png", "--size", "16,16"});
+    EXPECT_EQ(r.code, 1) << r.describe();
+    EXPECT_NE(r.err.find("image module"), std::string::npos) << r.describe();
+    EXPECT_NE(r.err.find(missing), std::string::npos) << r.describe();
+    EXPECT_TRUE(files().empty()) << r.describe();
+
+    std::ofstream(out("fake.so")) << "not a shared object\n";
+    r = withModule(out("fake.so").string(), {"render", shared("lic.vdb"), "--out", "o.png", "--size", "16,16"});
+    EXPECT_EQ(r.code, 1) << r.describe();
+    EXPECT_NE(r.err.find("cannot be loaded"), std::string::npos) << r.describe();
+    EXPECT_EQ(files(), (std::set<std::string>{"fake.so"})) << r.describe();
+
+    r = withModule(missing, {"bake", "--field", shared("abc.vdb"), "--out", "b.vdb", "--length", "4", "--quiet"});
+    EXPECT_EQ(r.code, 0) << r.describe();
+    EXPECT_TRUE(fs::is_regular_file(out("b.vdb"))) << r.describe();
+    // With the module found, the same render works.
+    r = run({"render", out("b.vdb").string(), "--out", "o.png", "--size", "16,16"});
+    EXPECT_EQ(r.code, 0) << r.describe();
+    EXPECT_EQ(vdbexport::readImage(out("o.png").string()).width, 16);
+}
+
 TEST_F(RenderCli, HelpListsRender)
 {
     RunResult r = run({"help", "render"});

@@ -1,24 +1,20 @@
+// The image functions of ImageIO.h. Those that need OpenImageIO or OpenColorIO run in the image
+// module (licvdb-image.so, ImageModule.cpp), loaded on first use: see ImageModuleApi.h.
 #include "vdbexport/io/ImageIO.h"
 #include "vdbexport/io/VdbIO.h"
 
-#include <lic/util/Error.h>
+#include "ImageModuleApi.h"
 
-#include <OpenColorIO/OpenColorIO.h>
-#include <OpenImageIO/imageio.h>
+#include <lic/util/Error.h>
 
 #include <algorithm>
 #include <cctype>
-#include <cerrno>
-#include <cmath>
 #include <cstdlib>
-#include <cstring>
 #include <filesystem>
-#include <memory>
+#include <mutex>
 
-#include <fcntl.h>
-#include <unistd.h>
+#include <dlfcn.h>
 
-namespace OCIO = OCIO_NAMESPACE;
 namespace fs = std::filesystem;
 
 namespace vdbexport {
@@ -34,17 +30,7 @@ std::string lowerExtension(const std::string& path)
     return e;
 }
 
-/// OIIO format name for an output extension; empty if unsupported.
-std::string formatFor(const std::string& path)
-{
-    const std::string e = lowerExtension(path);
-    if (e == ".exr") return "openexr";
-    if (e == ".png") return "png";
-    if (e == ".jpg" || e == ".jpeg") return "jpeg";
-    if (e == ".tif" || e == ".tiff") return "tiff";
-    if (e == ".gif") return "gif";
-    return "";
-}
+using image_module::formatFor;
 
 /// Check the image path (known extension, writable directory) and return the temporary name to
 /// write first; see detail::prepareAtomicWrite.
@@ -59,38 +45,87 @@ std::string prepare(const std::string& path)
 
 void commit(const std::string& tmp, const std::string& path) { detail::commitAtomicWrite(tmp, path); }
 
-/// Display-encoded float RGB → 8-bit, rounding to nearest.
-std::vector<unsigned char> toBytes(const std::vector<float>& rgb)
+/// Where the image module may be: $LICVDB_IMAGE_MODULE alone if set; else beside the running
+/// program, in its ../libexec/licvdb/, where this build put it, where `cmake --install` puts it.
+std::vector<fs::path> moduleCandidates()
 {
-    std::vector<unsigned char> out(rgb.size());
-    for (std::size_t i = 0; i < rgb.size(); ++i) {
-        const float v = std::clamp(rgb[i], 0.0f, 1.0f);
-        out[i] = static_cast<unsigned char>(std::lround(v * 255.0f));
+    if (const char* env = std::getenv(kImageModuleEnv); env && *env) return {env};
+    std::vector<fs::path> out;
+    std::error_code ec;
+    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+    if (!ec) {
+        out.push_back(exe.parent_path() / image_module::kFileName);
+        out.push_back(exe.parent_path() / ".." / "libexec" / "licvdb" / image_module::kFileName);
     }
+#ifdef LICVDB_IMAGE_MODULE_BUILD
+    out.emplace_back(LICVDB_IMAGE_MODULE_BUILD);
+#endif
+#ifdef LICVDB_IMAGE_MODULE_INSTALLED
+    out.emplace_back(LICVDB_IMAGE_MODULE_INSTALLED);
+#endif
     return out;
 }
 
-/// Write `subimages` (each a packed buffer with `spec`) to `tmp` with OIIO; throws lic::Error.
-void writeWithOiio(const std::string& path, const std::string& tmp, const std::vector<OIIO::ImageSpec>& specs,
-                   const std::vector<const void*>& pixels)
+/// The module's table, loaded once (never unloaded). @throw lic::Error naming where it looked.
+const image_module::Api& imageModule()
 {
-    auto out = OIIO::ImageOutput::create(formatFor(path));
-    if (!out) throw lic::Error("cannot write " + quote(path) + ": OpenImageIO has no writer for it (" + OIIO::geterror() + ")");
-    const bool multi = specs.size() > 1;
-    if (multi && !out->supports("multiimage"))
-        throw lic::Error("cannot write " + quote(path) + ": the format does not hold several images");
-    bool ok = multi ? out->open(tmp, int(specs.size()), specs.data()) : out->open(tmp, specs[0]);
-    for (std::size_t i = 0; ok && i < specs.size(); ++i) {
-        if (i > 0) ok = out->open(tmp, specs[i], OIIO::ImageOutput::AppendSubimage);
-        if (ok) ok = out->write_image(specs[i].format, pixels[i]);
-    }
-    const bool closed = out->close();
-    if (!ok || !closed) {
-        const std::string msg = out->geterror();
+    static std::once_flag once;
+    static const image_module::Api* api = nullptr;
+    static std::string failure;
+    std::call_once(once, [] {
+        std::string tried;
+        for (const fs::path& p : moduleCandidates()) {
+            std::error_code ec;
+            if (!fs::is_regular_file(p, ec)) {
+                tried += (tried.empty() ? "" : ", ") + p.lexically_normal().string();
+                continue;
+            }
+            void* handle = ::dlopen(p.c_str(), RTLD_NOW | RTLD_LOCAL);
+            if (!handle) {
+                const char* why = ::dlerror();
+                failure = "licvdb's image module " + quote(p.lexically_normal().string()) + " cannot be loaded ("
+                          + (why ? why : "no reason given") + "); reinstall licvdb";
+                return;
+            }
+            using Entry = const image_module::Api* (*)();
+            const auto entry = reinterpret_cast<Entry>(::dlsym(handle, image_module::kEntry));
+            const image_module::Api* table = entry ? entry() : nullptr;
+            if (!table || table->version != image_module::kVersion) {
+                failure = "licvdb's image module " + quote(p.lexically_normal().string())
+                          + " is not the one this licvdb was built with; reinstall licvdb";
+                return;
+            }
+            api = table;
+            return;
+        }
+        failure = std::string("licvdb's image module (") + image_module::kFileName
+                  + ": OpenImageIO, OpenColorIO) is missing; looked for " + tried + "; reinstall licvdb or set $"
+                  + kImageModuleEnv;
+    });
+    if (!api) throw lic::Error("cannot read or write images: " + failure);
+    return *api;
+}
+
+/// Turns an entry's Status into the exception ImageIO.h documents.
+void check(const image_module::Status& s)
+{
+    if (s.kind == image_module::Status::Input) throw lic::InputError(s.message);
+    if (s.kind != image_module::Status::Ok) throw lic::Error(s.message);
+}
+
+/// Runs `write(tmp)` on the temporary name of `path`, then commits; removes it on failure.
+template <typename F>
+void atomically(const std::string& path, F&& write)
+{
+    const std::string tmp = prepare(path); // the path's own errors first
+    try {
+        check(write(imageModule(), tmp));
+    } catch (...) {
         std::error_code ec;
         fs::remove(tmp, ec);
-        throw lic::Error("cannot write " + quote(path) + ": " + (msg.empty() ? std::string("write failed") : msg));
+        throw;
     }
+    commit(tmp, path);
 }
 
 } // namespace
@@ -135,24 +170,8 @@ std::string viewFromFlag(const std::string& flag)
 
 std::vector<float> toDisplay(const lic::Image& image, const DisplayTransform& t)
 {
-    std::vector<float> rgb(std::size_t(image.width) * std::size_t(image.height) * 3);
-    for (std::size_t i = 0, n = rgb.size() / 3; i < n; ++i)
-        for (int c = 0; c < 3; ++c) rgb[i * 3 + std::size_t(c)] = image.rgba[i * 4 + std::size_t(c)];
-    OCIO::ConstCPUProcessorRcPtr cpu;
-    try {
-        OCIO::ConstConfigRcPtr config = OCIO::Config::CreateFromFile(t.config.c_str());
-        OCIO::ConstProcessorRcPtr proc =
-            config->getProcessor(OCIO::ROLE_SCENE_LINEAR, t.display.c_str(), t.view.c_str(), OCIO::TRANSFORM_DIR_FORWARD);
-        cpu = proc->getDefaultCPUProcessor();
-    } catch (const OCIO::Exception& e) {
-        throw lic::InputError("OCIO display transform (config " + quote(t.config) + ", display " + quote(t.display) +
-                              ", view " + quote(t.view) + "): " + e.what());
-    }
-    if (!rgb.empty()) {
-        OCIO::PackedImageDesc desc(rgb.data(), image.width, image.height, 3);
-        cpu->apply(desc);
-    }
-    for (float& v : rgb) v = std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f) : 0.0f;
+    std::vector<float> rgb;
+    check(imageModule().toDisplay(image, t, rgb));
     return rgb;
 }
 
@@ -168,30 +187,9 @@ bool isSceneLinearPath(const std::string& path)
 void writeImageAtomic(const std::string& path, const lic::Image& image, const DisplayTransform& transform,
                       const std::map<std::string, std::string>& metadata)
 {
-    const std::string tmp = prepare(path);
-    OIIO::ImageSpec spec;
-    std::vector<float> linear;
-    std::vector<unsigned char> bytes;
-    const void* data = nullptr;
-    if (isSceneLinearPath(path)) {
-        spec = OIIO::ImageSpec(image.width, image.height, 4, OIIO::TypeDesc::FLOAT);
-        spec.channelnames = {"R", "G", "B", "A"};
-        spec.alpha_channel = 3;
-        spec.attribute("oiio:ColorSpace", "Linear");
-        // Rec.709 / sRGB primaries and D65 white: red, green, blue, white (x, y).
-        const float chroma[8] = {0.64f, 0.33f, 0.30f, 0.60f, 0.15f, 0.06f, 0.3127f, 0.3290f};
-        spec.attribute("chromaticities", OIIO::TypeDesc(OIIO::TypeDesc::FLOAT, 8), chroma);
-        spec.attribute("compression", "zip");
-        data = image.rgba.data();
-    } else {
-        spec = OIIO::ImageSpec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
-        spec.attribute("oiio:ColorSpace", "sRGB");
-        bytes = toBytes(toDisplay(image, transform));
-        data = bytes.data();
-    }
-    for (const auto& [k, v] : metadata) spec.attribute(k, v);
-    writeWithOiio(path, tmp, {spec}, {data});
-    commit(tmp, path);
+    atomically(path, [&](const image_module::Api& api, const std::string& tmp) {
+        return api.writeImage(path, tmp, image, transform, metadata);
+    });
 }
 
 void writeGifAtomic(const std::string& path, const std::vector<lic::Image>& frames, const DisplayTransform& transform,
@@ -200,25 +198,12 @@ void writeGifAtomic(const std::string& path, const std::vector<lic::Image>& fram
     if (frames.empty()) throw lic::InputError("cannot write " + quote(path) + ": no frames");
     if (lowerExtension(path) != ".gif")
         throw lic::InputError("cannot write an animation to " + quote(path) + "; expected a .gif path");
-    const std::string tmp = prepare(path);
-    std::vector<std::vector<unsigned char>> bytes;
-    std::vector<OIIO::ImageSpec> specs;
-    std::vector<const void*> data;
-    const int num = std::max(1, int(std::lround(fps * 100.0)));
-    for (const auto& f : frames) {
+    for (const auto& f : frames)
         if (f.width != frames[0].width || f.height != frames[0].height)
             throw lic::InputError("cannot write " + quote(path) + ": frames differ in size");
-        bytes.push_back(toBytes(toDisplay(f, transform)));
-        OIIO::ImageSpec spec(f.width, f.height, 3, OIIO::TypeDesc::UINT8);
-        const int rate[2] = {num, 100};
-        spec.attribute("FramesPerSecond", OIIO::TypeRational, rate);
-        spec.attribute("oiio:Movie", 1);
-        spec.attribute("oiio:LoopCount", 0);
-        specs.push_back(spec);
-    }
-    for (const auto& b : bytes) data.push_back(b.data());
-    writeWithOiio(path, tmp, specs, data);
-    commit(tmp, path);
+    atomically(path, [&](const image_module::Api& api, const std::string& tmp) {
+        return api.writeGif(path, tmp, frames, transform, fps);
+    });
 }
 
 std::string canonicalColorSpace(const std::string& oiioName)
@@ -234,21 +219,11 @@ std::string canonicalColorSpace(const std::string& oiioName)
 
 lic::Image readImage(const std::string& path, std::string* colorSpace)
 {
-    auto in = OIIO::ImageInput::open(path);
-    if (!in) throw lic::InputError("cannot read image " + quote(path) + ": " + OIIO::geterror());
-    const OIIO::ImageSpec& spec = in->spec();
-    std::vector<float> buf(std::size_t(spec.width) * std::size_t(spec.height) * std::size_t(spec.nchannels));
-    if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, buf.data()))
-        throw lic::InputError("cannot read image " + quote(path) + ": " + in->geterror());
-    if (colorSpace) *colorSpace = canonicalColorSpace(spec.get_string_attribute("oiio:ColorSpace"));
-    lic::Image img(spec.width, spec.height);
-    const std::size_t nc = std::size_t(spec.nchannels);
-    for (std::size_t i = 0, n = std::size_t(spec.width) * std::size_t(spec.height); i < n; ++i) {
-        for (std::size_t c = 0; c < 3; ++c) img.rgba[i * 4 + c] = buf[i * nc + std::min(c, nc - 1)];
-        img.rgba[i * 4 + 3] = nc >= 4 ? buf[i * nc + 3] : 1.0f;
-    }
-    in->close();
-    return img;
+    lic::Image image;
+    std::string stored;
+    check(imageModule().readImage(path, image, stored));
+    if (colorSpace) *colorSpace = canonicalColorSpace(stored);
+    return image;
 }
 
 } // namespace vdbexport

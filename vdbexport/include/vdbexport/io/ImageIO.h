@@ -1,6 +1,10 @@
 // Writing rendered images: scene-linear OpenEXR, and display-referred PNG/JPEG/TIFF/GIF through
 // an OpenColorIO display/view transform (our own small OCIO 2.1 config, share/ocio/config.ocio).
 // Every file is written to a temporary name and renamed, so a failure leaves no partial file.
+// OpenImageIO and OpenColorIO live in licvdb's image module (licvdb-image.so), loaded on the first
+// call that needs them (toDisplay, writeImageAtomic, writeGifAtomic, readImage): found through
+// $LICVDB_IMAGE_MODULE, beside the program, in its ../libexec/licvdb/, in licvdb's build tree or
+// where licvdb was installed; missing, those calls throw lic::Error saying where it looked.
 #pragma once
 
 #include <lic/render/Image.h>
@@ -10,6 +14,10 @@
 #include <vector>
 
 namespace vdbexport {
+
+/// Environment variable naming the image module's file (licvdb-image.so) to load, instead of
+/// looking for it (a program linking lic::vdbexport from a prefix licvdb was not configured for).
+inline constexpr const char* kImageModuleEnv = "LICVDB_IMAGE_MODULE";
 
 /// Environment variable that overrides the OCIO config licvdb ships.
 inline constexpr const char* kOcioConfigEnv = "LICVDB_OCIO_CONFIG";
