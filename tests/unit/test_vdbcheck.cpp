@@ -332,3 +332,40 @@ TEST_F(VdbCheckTest, HalfFloatFlagIsTakenFromTheMetadataAsOpenVdbDoes)
     writeFile(path, typed);
     EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkVdbStructure(path); }), "half-float flag is a bogo");
 }
+
+// What licvdb checks of a file it has just written (OutputSet::addVdb): the layout without decoding
+// the compressed blocks. It must still refuse every file cut short (a full disk) and every lying
+// block header, as the full check does.
+TEST_F(VdbCheckTest, TheLayoutCheckOfAWrittenFileRefusesEveryCutAsTheFullCheckDoes)
+{
+    const auto samples = vdb_samples::writeVdbSamples(mDir);
+    ASSERT_GE(samples.size(), 3u);
+    int cuts = 0;
+    for (const auto& sample : samples) {
+        const std::string bytes = readFile(sample);
+        const auto full = vdbexport::checkVdbStructure(sample);
+        const auto layout = vdbexport::checkVdbStructure(sample, vdbexport::VdbCheckDepth::Layout);
+        ASSERT_EQ(layout.grids.size(), full.grids.size()) << sample;
+        for (std::size_t i = 0; i < full.grids.size(); ++i) EXPECT_EQ(layout.grids[i].name, full.grids[i].name);
+        const std::string cut = (mDir / "cut.vdb").string();
+        for (int k = 1; k < 24; ++k) {
+            const std::size_t n = bytes.size() * std::size_t(k) / 24;
+            writeFile(cut, bytes.substr(0, n));
+            const std::string msg = inputErrorOf([&] { vdbexport::checkVdbStructure(cut, vdbexport::VdbCheckDepth::Layout); });
+            EXPECT_FALSE(msg.empty()) << sample << " cut to " << n << " of " << bytes.size() << " bytes was accepted";
+            EXPECT_FALSE(inputErrorOf([&] { vdbexport::checkVdbStructure(cut); }).empty());
+            ++cuts;
+        }
+    }
+    EXPECT_GE(cuts, 60);
+    // A lying blosc header (the block claims more bytes than its leaf holds) is refused without decoding.
+    std::string bytes = readFile(samples[0]);
+    const std::size_t at = vdb_mutants::findBloscHeader(bytes, 6144);
+    ASSERT_NE(at, std::string::npos);
+    const uint32_t lie = 8182;
+    std::memcpy(&bytes[at + 4], &lie, 4);
+    const std::string path = (mDir / "lying.vdb").string();
+    writeFile(path, bytes);
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkVdbStructure(path, vdbexport::VdbCheckDepth::Layout); }),
+                    "claims 8182 bytes where 6144 are expected");
+}

@@ -140,7 +140,7 @@ std::string coordString(const openvdb::Coord& c)
 class Checker
 {
 public:
-    explicit Checker(const std::string& path) : mPath(path)
+    Checker(const std::string& path, bool decode) : mPath(path), mDecode(decode)
     {
         mFile = std::fopen(path.c_str(), "rb");
         if (!mFile)
@@ -260,6 +260,7 @@ private:
     std::string mPath;
     std::FILE* mFile = nullptr;
     uint64_t mSize = 0, mPos = 0;
+    bool mDecode = true; ///< decode compressed blocks (false: their headers and sizes only)
     std::vector<std::string> mWhere;
     uint32_t mVersion = 0;
     uint32_t mCompression = 0; ///< of the grid being walked
@@ -459,6 +460,7 @@ void Checker::bloscBlock(const std::vector<char>& data, uint64_t bytes, bool boo
     size_t checkedBytes = 0;
     if (blosc_cbuffer_validate(data.data(), n, &checkedBytes) != 0 || checkedBytes != bytes)
         throw corrupt("blosc-header", "a blosc block has an invalid header");
+    if (!mDecode) return;
     // Decode into a buffer with a guard zone behind it: the block must fill exactly `bytes`.
     std::vector<unsigned char> out(bytes + kGuardBytes, 0xA5);
     const int got = blosc_decompress_ctx(data.data(), out.data(), bytes, 1);
@@ -512,6 +514,7 @@ void Checker::block(uint64_t bytes, bool boolValues, const char* what)
         bloscBlock(data, bytes, boolValues);
         return;
     }
+    if (!mDecode) return;
     std::vector<unsigned char> out(bytes + 1);
     uLongf outBytes = uLongf(bytes);
     const int rc = uncompress(out.data(), &outBytes, reinterpret_cast<const Bytef*>(data.data()), uLong(n));
@@ -779,7 +782,7 @@ uint64_t readMemoryLimitBytes()
     return pages > 0 && pageSize > 0 ? uint64_t(0.8 * double(pages) * double(pageSize)) : 0;
 }
 
-VdbCheckResult checkVdbStructure(const std::string& path)
+VdbCheckResult checkVdbStructure(const std::string& path, VdbCheckDepth depth)
 {
     openvdb::initialize();
     struct stat st{};
@@ -789,8 +792,9 @@ VdbCheckResult checkVdbStructure(const std::string& path)
     if (S_ISDIR(st.st_mode)) throw refusal("directory", quote(path) + " is a directory; expected a .vdb file");
     if (S_ISREG(st.st_mode) && st.st_size == 0)
         throw refusal("empty", "file " + quote(path) + " is empty (0 bytes); expected a .vdb file");
-    Checker checker(path);
+    Checker checker(path, depth == VdbCheckDepth::Full);
     VdbCheckResult r = checker.run();
+    if (depth == VdbCheckDepth::Layout) return r; // a file this process wrote from what it held
     const uint64_t limit = readMemoryLimitBytes();
     if (limit > 0 && r.memoryBytes > limit)
         throw refusal("memory", quote(path) + " would need about " + std::to_string(r.memoryBytes >> 20)

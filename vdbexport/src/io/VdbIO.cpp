@@ -650,7 +650,7 @@ void OutputSet::addVdb(const std::string& path, openvdb::GridPtrVec grids, const
         // io::File does not report stream errors after opening (e.g. a full disk): check the
         // structure of what was written and read the headers back.
         try {
-            checkVdbStructure(tmp);
+            checkVdbStructure(tmp, VdbCheckDepth::Layout);
         } catch (const lic::InputError& e) {
             throw lic::Error("cannot write " + quote(path) + ": the file written is incomplete (disk full?): "
                              + e.what());

@@ -49,6 +49,9 @@ struct VdbCheckResult
     std::vector<VdbGridCheck> grids;
 };
 
+/// How deep checkVdbStructure looks (see there).
+enum class VdbCheckDepth { Full, Layout };
+
 /// @brief Walk a .vdb file's whole structure with bounds-checked reads, as OpenVDB 10 would read
 ///        it, and refuse it before OpenVDB copies anything if any count, size or offset stored in
 ///        the file disagrees with the file itself.
@@ -71,7 +74,11 @@ struct VdbCheckResult
 /// @throw lic::InputError beginning with kVdbCheckMarker and the rule's name, naming `path`,
 ///        where in the file (grid, node origin, byte offset) and what is wrong: not a VDB file,
 ///        truncated, unsupported format version, corrupt, or too large.
-VdbCheckResult checkVdbStructure(const std::string& path);
+/// @param depth  Full (the default, for every file read) or Layout: every rule but the decoding of
+///        compressed blocks (their headers and sizes are still checked) and the memory limit: for
+///        a file licvdb has just written, where what is checked is that it was written whole (a
+///        full disk cuts it short), not that an untrusted writer made it.
+VdbCheckResult checkVdbStructure(const std::string& path, VdbCheckDepth depth = VdbCheckDepth::Full);
 
 /// @brief The memory a file's grids may need for checkVdbStructure to pass it, in bytes: 80 % of
 ///        this machine's physical memory, or $LICVDB_READ_MEMORY_MB MiB if set (> 0); 0 (no
