@@ -460,7 +460,9 @@ TEST_F(StreamBake, VelocityGridGivesTheMotionOfTheLines)
             ASSERT_GT(got.dot(v) / (got.length() * v.length()), 0.9999) << what << ": not along the flow";
         }
         EXPECT_GT(n, 1000u) << what;
-        if (speed > 0) EXPECT_GT(moving, n / 2) << what;
+        if (speed > 0) {
+            EXPECT_GT(moving, n / 2) << what;
+        }
     };
     auto still = spotRecipe("vel_still.vdb");
     still.output.writeVelocity = true;

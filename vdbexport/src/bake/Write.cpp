@@ -5,7 +5,12 @@
 
 #include "lic/composite/Colormap.h"
 
+#include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
 #include <filesystem>
+#include <optional>
 
 namespace vdbexport::pipeline {
 
@@ -69,14 +74,72 @@ Description describeBake(const Plan& plan, const nlohmann::json& resolved, const
     return d;
 }
 
-void stageFrame(const Recipe& recipe, openvdb::GridPtrVec& grids, const openvdb::MetaMap& densityMeta, int frameNumber,
-                const std::string& path, OutputSet& output)
+namespace {
+
+/// A frame's metadata (`densityMeta` and `lic_frame` on `density`) and half floats if asked. The
+/// grids every frame shares (tangent, colour...) are flagged once, by frame 1: later frames only
+/// read them, so they may be written while the next frame is prepared.
+void prepareFrame(const Recipe& recipe, openvdb::GridPtrVec& grids, const openvdb::MetaMap& densityMeta, int frameNumber)
 {
     openvdb::GridBase& density = *grids.front();
     for (auto it = densityMeta.beginMeta(); it != densityMeta.endMeta(); ++it) density.insertMeta(it->first, *it->second);
     density.insertMeta("lic_frame", openvdb::Int32Metadata(frameNumber));
     if (recipe.output.half)
-        for (const auto& g : grids) g->setSaveFloatAsHalf(true);
+        for (const auto& g : grids)
+            if (!g->saveFloatAsHalf()) g->setSaveFloatAsHalf(true);
+}
+
+/// The frames of one process (nothing to gather): composed in order, written (compressed,
+/// checked, hashed) on up to one thread per core at once, added to the set in order. At most that
+/// many frames' grids are held at a time. The files are the same bytes as written one by one.
+void writeFramesConcurrently(const Recipe& r, lic::Compositor& compositor, const openvdb::MetaMap& densityMeta,
+                             lic::Progress& progress, int frames, Written& out)
+{
+    struct Job
+    {
+        int frame = 0;
+        openvdb::GridPtrVec grids;
+        std::optional<OutputSet::Pending> file;
+    };
+    using JobPtr = std::shared_ptr<Job>;
+    int next = 1;
+    bool cancelled = false;
+    const auto tokens = std::size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+    tbb::parallel_pipeline(
+        tokens,
+        tbb::make_filter<void, JobPtr>(tbb::filter_mode::serial_in_order,
+                                       [&](tbb::flow_control& fc) -> JobPtr {
+                                           if (next > frames || progress.wasInterrupted()) {
+                                               cancelled = next <= frames;
+                                               fc.stop();
+                                               return nullptr;
+                                           }
+                                           auto job = std::make_shared<Job>();
+                                           job->frame = next++;
+                                           job->grids = compositor.frame(job->frame);
+                                           prepareFrame(r, job->grids, densityMeta, job->frame);
+                                           return job;
+                                       })
+            & tbb::make_filter<JobPtr, JobPtr>(tbb::filter_mode::parallel,
+                                               [&](JobPtr job) {
+                                                   job->file.emplace(OutputSet::writeVdb(
+                                                       out.paths[std::size_t(job->frame - 1)], job->grids));
+                                                   return job;
+                                               })
+            & tbb::make_filter<JobPtr, void>(tbb::filter_mode::serial_in_order, [&](JobPtr job) {
+                  out.output->add(std::move(*job->file));
+                  if (job->frame == 1) out.firstGrids = job->grids;
+                  progress.advance(1);
+              }));
+    if (cancelled) throw lic::Cancelled();
+}
+
+} // namespace
+
+void stageFrame(const Recipe& recipe, openvdb::GridPtrVec& grids, const openvdb::MetaMap& densityMeta, int frameNumber,
+                const std::string& path, OutputSet& output)
+{
+    prepareFrame(recipe, grids, densityMeta, frameNumber);
     output.addVdb(path, grids);
 }
 
@@ -102,7 +165,9 @@ Written writeFrames(const Plan& plan, lic::Compositor& compositor, const openvdb
     for (int f = 1; f <= plan.frames; ++f) out.paths.push_back(framePath(r.output.path, f, plan.frames));
     progress.begin(plan.frames > 1 ? "writing frames" : "writing", std::uint64_t(plan.frames));
     out.output = std::make_shared<OutputSet>(); // staged unseen; nothing to remove on failure
-    {
+    if (!gather && plan.frames > 1) {
+        writeFramesConcurrently(r, compositor, densityMeta, progress, plan.frames, out);
+    } else {
         for (int f = 1; f <= plan.frames; ++f) {
             if (progress.wasInterrupted()) throw lic::Cancelled();
             openvdb::GridPtrVec grids = compositor.frame(f);

@@ -592,10 +592,14 @@ void OutputSet::discard(Staged& f)
     }
 }
 
-OutputSet::Staged OutputSet::stage(const std::string& path)
+void OutputSet::refuseTwice(const std::string& path) const
 {
     for (const auto& f : mFiles)
         if (f.path == path) throw lic::Error("cannot write " + quote(path) + " twice in one output set");
+}
+
+OutputSet::Staged OutputSet::stage(const std::string& path)
+{
     Staged f;
     f.path = path;
     const std::string named = detail::prepareAtomicWrite(path);
@@ -627,6 +631,20 @@ void OutputSet::finish(Staged& f)
 }
 
 void OutputSet::addVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)
+{
+    refuseTwice(path);
+    add(writeVdb(path, std::move(grids), fileMetadata));
+}
+
+void OutputSet::add(Pending&& file)
+{
+    refuseTwice(file.mFile.path);
+    mFiles.push_back(std::move(file.mFile));
+    file.mFile.fd = -1;
+    file.mFile.named.clear();
+}
+
+OutputSet::Pending OutputSet::writeVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)
 {
     openvdb::initialize();
     Staged f = stage(path);
@@ -671,11 +689,12 @@ void OutputSet::addVdb(const std::string& path, openvdb::GridPtrVec grids, const
         discard(f);
         throw lic::Error("cannot write " + quote(path) + ": " + e.what());
     }
-    mFiles.push_back(std::move(f));
+    return Pending(std::move(f));
 }
 
 void OutputSet::addText(const std::string& path, const std::string& text)
 {
+    refuseTwice(path);
     Staged f = stage(path);
     try {
         std::ofstream out(target(f), std::ios::binary | std::ios::trunc);

@@ -67,14 +67,45 @@ void writeTextAtomic(const std::string& path, const std::string& text);
 /// removes what a killed process left. The destructor discards whatever was not committed.
 class OutputSet
 {
+    struct Staged
+    {
+        std::string path;
+        int fd = -1;       ///< the unnamed temporary file
+        std::string named; ///< or a named temporary
+        std::string sha256;
+    };
+
 public:
     OutputSet() = default;
     ~OutputSet();
     OutputSet(const OutputSet&) = delete;
     OutputSet& operator=(const OutputSet&) = delete;
 
+    /// A .vdb file written to its unseen temporary but not yet in a set: what writeVdb returns, so
+    /// that several files can be written at once (on several threads) and added in a fixed order.
+    /// Dropped without add(), it leaves nothing on disk.
+    class Pending
+    {
+    public:
+        Pending(Pending&& o) noexcept : mFile(std::move(o.mFile)) { o.mFile.fd = -1, o.mFile.named.clear(); }
+        Pending& operator=(Pending&&) = delete;
+        Pending(const Pending&) = delete;
+        ~Pending() { discard(mFile); }
+
+    private:
+        friend class OutputSet;
+        explicit Pending(Staged f) : mFile(std::move(f)) {}
+        Staged mFile;
+    };
+
+    /// Write grids for `path` as addVdb does, not yet into any set. Safe to call on several threads
+    /// at once for different paths (and grids only read: shared grids are fine).
+    /// @throw as writeVdbAtomic.
+    static Pending writeVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata = {});
+    /// Stage a file writeVdb wrote. @throw lic::Error if the set has a file for its path already.
+    void add(Pending&& file);
     /// Stage grids for `path`, as writeVdbAtomic writes them (active tiles voxelized on copies,
-    /// structure checked after writing). @throw as writeVdbAtomic.
+    /// structure checked after writing): add(writeVdb(...)). @throw as writeVdbAtomic.
     void addVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata = {});
     /// Stage a text file for `path`. @throw as writeTextAtomic.
     void addText(const std::string& path, const std::string& text);
@@ -85,14 +116,8 @@ public:
     void commit();
 
 private:
-    struct Staged
-    {
-        std::string path;
-        int fd = -1;       ///< the unnamed temporary file
-        std::string named; ///< or a named temporary
-        std::string sha256;
-    };
-    Staged stage(const std::string& path);
+    void refuseTwice(const std::string& path) const;
+    static Staged stage(const std::string& path);
     static std::string target(const Staged& f);
     static void finish(Staged& f);
     static void discard(Staged& f);
