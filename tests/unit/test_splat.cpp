@@ -292,16 +292,17 @@ double bestShift(const VelocityField& field, const OutputDomain& d, const std::v
 TEST(SplatComets, TravelDownstreamAtOnePaceAndLoop)
 {
     // Uniform +x flow, Poisson spots 6 apart, radius 1, length 12; box and exp kernels, 8 and 24
-    // frames. Every consecutive pair of frames, the seam (frame N → frame 1) included, is best
-    // matched by one shift downstream: P / N (cometSpacing) within ±1 voxel. The line channel's
-    // mean (the frame's brightness) stays within ±5 %.
+    // frames; the splat and the fast engine. Every consecutive pair of frames, the seam (frame N →
+    // frame 1) included, is best matched by one shift downstream: P / N (cometSpacing) within ±1
+    // voxel. The line channel's mean (the frame's brightness) stays within ±5 %.
     const VelocityField field(makePresetField("uniform", openvdb::Coord(160, 20, 20)).velocity);
     const OutputDomain domain(field, 1);
     const SpotSet set = poissonSpots(domain, 6.0, 3);
+    for (EngineType e : {EngineType::Splat, EngineType::Fast})
     for (KernelType k : {KernelType::Box, KernelType::Exp}) {
         for (int N : {8, 24}) {
             LicSettings s;
-            s.engine = EngineType::Splat;
+            s.engine = e;
             s.length = 12;
             s.kernel = k;
             s.decay = 0.85;
@@ -316,12 +317,13 @@ TEST(SplatComets, TravelDownstreamAtOnePaceAndLoop)
             for (int f = 0; f < N; ++f) {
                 const int g = (f + 1) % N;
                 const double shift = bestShift(field, domain, r.channels[std::size_t(2 * f)], r.channels[std::size_t(2 * g)]);
+                const std::string what = std::string(toString(e)) + " " + toString(k) + " " + std::to_string(N) + " frames";
                 if (f == 0 || f == N - 1)
-                    std::printf("%s %d frames: frame %d -> %d best shift %.3f (P/N %.3f), mean %.5f\n", toString(k), N,
-                                f + 1, g + 1, shift, expect, means[std::size_t(f)]);
-                EXPECT_GT(shift, 0.0) << toString(k) << " " << N << " frames, pair " << f + 1;
-                EXPECT_NEAR(shift, expect, 1.0) << toString(k) << " " << N << " frames, pair " << f + 1 << " -> " << g + 1;
-                EXPECT_NEAR(means[std::size_t(f)], avg, 0.05 * avg) << toString(k) << " " << N << " frames, frame " << f + 1;
+                    std::printf("%s: frame %d -> %d best shift %.3f (P/N %.3f), mean %.5f\n", what.c_str(), f + 1, g + 1,
+                                shift, expect, means[std::size_t(f)]);
+                EXPECT_GT(shift, 0.0) << what << ", pair " << f + 1;
+                EXPECT_NEAR(shift, expect, 1.0) << what << ", pair " << f + 1 << " -> " << g + 1;
+                EXPECT_NEAR(means[std::size_t(f)], avg, 0.05 * avg) << what << ", frame " << f + 1;
             }
         }
     }
@@ -330,15 +332,27 @@ TEST(SplatComets, TravelDownstreamAtOnePaceAndLoop)
 TEST(SplatComets, MoveDownstreamInTheTabbedJet)
 {
     // In the curved, diverging jet the comets move along the local flow: every consecutive pair's
-    // best shift along the flow is downstream (the frames' moving part: each minus the loop mean).
+    // best shift along the flow is downstream (the frames' moving part: each minus the loop mean),
+    // with the splat engine and with the fast one, whose frames show the same comets.
     const VelocityField field(makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36)).velocity);
     const OutputDomain domain(field, 2);
     const SpotSet set = poissonSpots(domain, 8.0, 11);
+    std::vector<std::vector<float>> splatFrames;
+    for (EngineType e : {EngineType::Splat, EngineType::Fast}) {
     LicSettings s;
-    s.engine = EngineType::Splat;
+    s.engine = e;
     s.length = 6;
     s.comets = 8;
     const LicResult r = convolveSpots(field, domain, set, {1.5}, 2.0, s);
+    if (e == EngineType::Splat) {
+        splatFrames = r.channels;
+    } else {
+        for (int f = 0; f < 8; ++f) {
+            const double c = correlation(domain, splatFrames[std::size_t(2 * f)], r.channels[std::size_t(2 * f)]);
+            std::printf("tabbed jet frame %d: fast vs splat correlation %.3f\n", f + 1, c);
+            EXPECT_GT(c, 0.9) << "frame " << f + 1;
+        }
+    }
     const std::size_t V = r.channels[0].size();
     std::vector<float> mean(V, 0.0f);
     for (int f = 0; f < 8; ++f)
@@ -349,17 +363,18 @@ TEST(SplatComets, MoveDownstreamInTheTabbedJet)
     const double expect = cometSpacing(s, 3.0) / 8.0;
     for (int f = 0; f < 8; ++f) {
         const double shift = bestShift(field, domain, moving[std::size_t(f)], moving[std::size_t((f + 1) % 8)]);
-        std::printf("tabbed jet frame %d -> %d: best shift along the flow %.3f (P/N %.3f)\n", f + 1, (f + 1) % 8 + 1,
-                    shift, expect);
-        EXPECT_GT(shift, 0.5 * expect) << "pair " << f + 1;
-        EXPECT_LT(shift, 1.5 * expect + 1.0) << "pair " << f + 1;
+        std::printf("%s tabbed jet frame %d -> %d: best shift along the flow %.3f (P/N %.3f)\n", toString(e), f + 1,
+                    (f + 1) % 8 + 1, shift, expect);
+        EXPECT_GT(shift, 0.5 * expect) << toString(e) << " pair " << f + 1;
+        EXPECT_LT(shift, 1.5 * expect + 1.0) << toString(e) << " pair " << f + 1;
+    }
     }
 }
 
 TEST(SplatComets, OneTraceServesEveryFrameAndThreadsAgree)
 {
     // A comet loop traces one line per spot, as a still does (longer: the train's extent), and is
-    // bit-identical for 1 to 3 threads.
+    // bit-identical for 1 to 3 threads; so is the fast engine's.
     const tbb::global_control allow(tbb::global_control::max_allowed_parallelism, 3);
     const VelocityField field(makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36)).velocity);
     const OutputDomain domain(field, 2);
@@ -383,8 +398,21 @@ TEST(SplatComets, OneTraceServesEveryFrameAndThreadsAgree)
             EXPECT_EQ(0, std::memcmp(ref[k].data(), r.channels[k].data(), ref[k].size() * sizeof(float)))
                 << "channel " << k << ", " << threads << " threads";
     }
-    // The comets are refused by the gather engines, and with the ripple sums.
     s.engine = EngineType::Fast;
+    for (int threads : {1, 2, 3}) {
+        s.threads = threads;
+        const LicResult r = convolveSpots(field, domain, set, {1.0, 2.0}, 2.0, s);
+        ASSERT_EQ(r.channels.size(), 6u * 4u);
+        if (threads == 1) {
+            ref = r.channels;
+            continue;
+        }
+        for (std::size_t k = 0; k < ref.size(); ++k)
+            EXPECT_EQ(0, std::memcmp(ref[k].data(), r.channels[k].data(), ref[k].size() * sizeof(float)))
+                << "fast: channel " << k << ", " << threads << " threads";
+    }
+    // The comets are refused by the naive engine, and with the ripple sums.
+    s.engine = EngineType::Naive;
     EXPECT_THROW(s.validate(), InputError);
     s.engine = EngineType::Splat;
     s.ripple = true;

@@ -1,6 +1,7 @@
 #include "lic/engine/Engine.h"
 
 #include "lic/engine/Gather.h"
+#include "lic/engine/Kernels.h"
 #include "lic/engine/Splat.h"
 #include "lic/util/Error.h"
 #include "lic/util/Names.h"
@@ -23,13 +24,24 @@ int gatherBrickDim(const LicSettings& settings)
     // Measured on the 128³ abc bake (docs/performance.md): 64 for kernels up to ~24 voxels;
     // longer kernels need larger bricks to keep the window tails (n samples past each end of a
     // line) a small part of each line. Powers of two, so power-of-two volumes split evenly.
+    // Comet loops keep frames · C sums per voxel of a brick (and as many outputs): 64³, so that a
+    // 24-frame loop's brick holds 0.1 GiB, not 0.8 (the figure-11 loop: 0.8 GiB peak instead of
+    // 2.0, for 20 % more time).
+    if (settings.comets > 0) return 64;
     return settings.length <= 24 ? 64 : 128;
+}
+
+/// Comet loops of the fast engine: how much farther its lines run past a brick (the train's
+/// spacing, plus the sample a copy is shared with); 0 otherwise.
+double gatherCometReach(const LicSettings& settings, double maxSpotRadius)
+{
+    return settings.comets > 0 ? cometSpacing(settings, maxSpotRadius) + 2.0 * settings.step : 0.0;
 }
 
 double gatherSpotReach(const LicSettings& settings, double maxSpotRadius)
 {
     // A voxel's window (the ghost margin) meets the spot's largest halo, with its soft edge.
-    return double(ghostMargin(settings)) + (maxSpotRadius + 0.5) + 2.0;
+    return double(ghostMargin(settings)) + gatherCometReach(settings, maxSpotRadius) + (maxSpotRadius + 0.5) + 2.0;
 }
 
 double gatherFieldReach(const LicSettings& settings, bool spots, double maxSpotRadius, int stride)
@@ -40,7 +52,7 @@ double gatherFieldReach(const LicSettings& settings, bool spots, double maxSpotR
     // ROI pre-mask at their centres).
     const double integration = std::max({double(stride) * settings.step, 2.0, settings.step}) + 1.0;
     double out = double(ghostMargin(settings)) + integration;
-    if (spots) out += maxSpotRadius + 1.5;
+    if (spots) out += gatherCometReach(settings, maxSpotRadius) + maxSpotRadius + 1.5;
     return out;
 }
 

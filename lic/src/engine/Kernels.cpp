@@ -1,5 +1,6 @@
 #include "lic/engine/Kernels.h"
 
+#include "lic/texture/Noise.h"
 #include "lic/texture/Spots.h"
 
 #include <algorithm>
@@ -33,6 +34,21 @@ double cometSpacing(const LicSettings& settings, double maxRadius)
     const int n = settings.halfSamples();
     const double extent = double(settings.kernel == KernelType::Box ? 2 * n : n) * settings.step;
     return extent + 4.0 * (maxRadius + 0.5);
+}
+
+double cometFade(double a, double spacing)
+{
+    if (!(std::abs(a) < spacing)) return 0.0;
+    const double c = std::cos(3.14159265358979323846 * a / (2.0 * spacing));
+    return c * c;
+}
+
+int cometPhase(const openvdb::Vec3d& centre, int frames)
+{
+    // The noise's coordinate hash over the centre to 1/256 voxel (distinct spots are ≥ 0.88·d apart).
+    constexpr std::uint64_t kCometSeed = 0x636f6d6574ull; // "comet"
+    auto q = [&](int a) { return int(std::lround(centre[a] * 256.0)); };
+    return int(hashCoord(kCometSeed, q(0), q(1), q(2)) % std::uint64_t(frames));
 }
 
 namespace detail {

@@ -40,8 +40,8 @@ void LicSettings::validate() const
     if (stride < 0 || stride > 64) fail("stride", stride, "0..64 samples per integration step (0 = automatic)");
     if (comets < 0 || comets == 1 || comets > 10000) fail("comet frames", comets, "0 (none) or 2..10000");
     if (comets > 0 && ripple) throw InputError("a loop has either ripple sums or comets, not both");
-    if (comets > 0 && engine != EngineType::Splat)
-        throw InputError("comet loops are made by the splat engine (spot input); other engines make ripple loops");
+    if (comets > 0 && engine == EngineType::Naive)
+        throw InputError("comet loops are made by the splat and fast engines (spot input); the naive engine makes ripple loops");
 }
 
 namespace detail {

@@ -21,8 +21,6 @@ namespace lic {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-
 /// Kernel weight of window sample i (box: i in [−n, n]; exp: i in [0, n], c^i).
 struct Window
 {
@@ -188,12 +186,7 @@ CometTables::CometTables(const SplatTables& still, const LicSettings& settings, 
     });
 }
 
-double CometTables::fade(double a) const
-{
-    if (!(std::abs(a) < mP)) return 0.0;
-    const double c = std::cos(kPi * a / (2.0 * mP));
-    return c * c;
-}
+double CometTables::fade(double a) const { return cometFade(a, mP); }
 
 CometTables::Corners CometTables::corners(double tau, double d, float a) const
 {
@@ -235,13 +228,6 @@ void CometTables::addPhase(double tau, double d, float a, int g, float* out) con
         out[c] += k.w[0] * k.p[0][o + c] + k.w[1] * k.p[1][o + c] + k.w[2] * k.p[2][o + c] + k.w[3] * k.p[3][o + c];
 }
 
-int cometPhase(const openvdb::Vec3d& centre, int frames)
-{
-    // The noise's coordinate hash over the centre to 1/256 voxel (distinct spots are ≥ 0.88·d apart).
-    constexpr std::uint64_t kCometSeed = 0x636f6d6574ull; // "comet"
-    auto q = [&](int a) { return int(std::lround(centre[a] * 256.0)); };
-    return int(hashCoord(kCometSeed, q(0), q(1), q(2)) % std::uint64_t(frames));
-}
 
 namespace {
 

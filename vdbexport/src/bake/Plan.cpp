@@ -102,8 +102,9 @@ Plan makePlan(const Recipe& recipe)
     s.brick = recipe.lic.brick;
     s.threads = recipe.threads;
     p.frames = recipe.animation.frames;
-    // Spot loops of the splat engine carry travelling comets; every other loop the ripple sums.
-    if (p.frames > 1 && p.spots && s.engine == lic::EngineType::Splat) s.comets = p.frames;
+    // Spot loops of the splat and fast engines carry travelling comets; every other loop (noise,
+    // or spots with the naive engine) the ripple sums.
+    if (p.frames > 1 && p.spots && s.engine != lic::EngineType::Naive) s.comets = p.frames;
     else s.ripple = p.frames > 1;
     s.validate();
 

@@ -8,6 +8,11 @@
 // last deposits are complete. Voxels are normalised by their deposit weight at the end. The
 // accumulators are floats local to the brick and the brick is processed by one thread in a fixed
 // order, so the result depends only on the brick (see field/Bricks.h).
+//
+// Comet loops of spots (LicSettings::comets = N frames): each spot's part of the texture along a
+// line is moved to its comets' arcs (the copies of engine/Splat.h CometTables, with the spot's
+// phase) and the window slides over each frame's moved texture, so one trace gives every frame
+// (docs/technique.md §8).
 #pragma once
 
 #include "lic/engine/Kernels.h"
@@ -16,6 +21,7 @@
 #include "lic/field/Bricks.h"
 #include "lic/field/Field.h"
 #include "lic/field/OutputDomain.h"
+#include "lic/util/Error.h"
 #include "lic/util/Progress.h"
 
 #include <openvdb/math/Vec3.h>
@@ -45,6 +51,7 @@ struct FastScratch
     std::vector<openvdb::Vec3d> idxB, idxF, idx;  // output-index positions per side, assembled
     std::vector<std::int64_t> locB, locF, loc;    // local voxel per sample (−1 = not ours)
     std::vector<double> vals, win, norm, scratch; // samples, window sums, kernel weights
+    std::vector<double> moved, movedWin, subNorm; // comet loops: moved texture, its window sums
 };
 
 /// The streamlines of one brick of the fast engine: trace from a seed, sample the texture along
@@ -65,6 +72,8 @@ public:
 
     /// Trace the line through the voxel `ijk` (local index `seedLocal`) and deposit along it.
     void traceAndDeposit(std::int64_t seedLocal, const openvdb::Coord& ijk);
+    /// Output channels per voxel: K, or frames · C for a comet loop.
+    int channels() const { return mFrames > 0 ? mFrames * C : K; }
 
     std::uint64_t samples = 0, deposits = 0, streamlines = 0;
 
@@ -85,6 +94,13 @@ private:
     void convolveLine(std::size_t N);
     /// Deposit the window averages of samples lo … hi into their voxels.
     void deposit(std::size_t lo, std::size_t hi);
+    /// Comet loops: every frame's moved texture along the line (each spot's part at its copies'
+    /// arcs, faded near a natural end), then each frame's window sums.
+    void convolveComets(std::size_t N, bool endBack, bool endFwd);
+    /// Comet loops: deposit every frame's window averages of samples lo … hi.
+    void depositComets(std::size_t lo, std::size_t hi);
+    /// The widest footprint of the texture's channels (a halo's radius): sets the comet spacing.
+    static double maxRadius(const Texture& texture);
 
     const VelocityField& mField;
     const OutputDomain& mDomain;
@@ -96,6 +112,13 @@ private:
     double mTheta, mUp, mUpOff;
     std::uint8_t mMinHits;
     bool mOriented;
+    // Comet loops (mFrames > 0): the spacing P (output voxels), the fade ramp at a natural end
+    // (half a comet), each phase's two copies' arcs in samples and fades.
+    int mFrames = 0;
+    double mSpacing = 0, mRamp = 0;
+    std::vector<double> mCopyShift, mCopyFade; // [phase][copy]
+    int mTail; ///< samples traced past the last deposit: n, or n + P/h + 1 for comets
+    std::size_t mWinLo = 1, mWinHi = 0; ///< comets: the line's stretch of non-zero windows
 };
 
 } // namespace detail
@@ -125,15 +148,15 @@ void FastEngine::brick(const VelocityField& field, const OutputDomain& domain, c
                        const Texture& texture, const LicSettings& settings, Scratch& sc, std::vector<float>& out,
                        LicStats& stats, Progress&)
 {
-    constexpr int K = detail::FastLines<Texture, Ripple>::K;
     constexpr std::size_t V = OutputDomain::kBlockVoxels;
     sc.index = BrickIndex(domain, brick, brick.box.dim()[0]);
     const BrickIndex& bi = sc.index;
     const std::size_t voxels = bi.voxels();
-    sc.weight.assign(voxels, 0.0f);
-    sc.sum.assign(voxels * K, 0.0f);
-    sc.hits.assign(voxels, 0);
     detail::FastLines<Texture, Ripple> lines(field, domain, texture, settings, sc);
+    const int K = lines.channels();
+    sc.weight.assign(voxels, 0.0f);
+    sc.sum.assign(voxels * std::size_t(K), 0.0f);
+    sc.hits.assign(voxels, 0);
 
     // Seeds: every active voxel of the brick in scan order that has fewer than min_hits deposits
     // when the scan reaches it.
@@ -159,7 +182,8 @@ void FastEngine::brick(const VelocityField& field, const OutputDomain& domain, c
             const float w = sc.weight[base + off];
             if (!(w > 0.0f)) continue;
             const float inv = 1.0f / w;
-            for (int k = 0; k < K; ++k) dst[std::size_t(k) * V + off] = sc.sum[(base + off) * K + std::size_t(k)] * inv;
+            for (int k = 0; k < K; ++k)
+                dst[std::size_t(k) * V + off] = sc.sum[(base + off) * std::size_t(K) + std::size_t(k)] * inv;
         }
     }
     stats.samples += lines.samples;
@@ -185,9 +209,37 @@ FastLines<Texture, Ripple>::FastLines(const VelocityField& field, const OutputDo
     , mUpOff(0.5 * (double(domain.upsample()) - 1.0))
     , mMinHits(std::uint8_t(settings.minHits))
     , mOriented(settings.kernel == KernelType::Exp)
+    , mTail(mN)
 {
+    if (!Ripple && settings.comets > 0) {
+        mFrames = settings.comets;
+        mSpacing = cometSpacing(settings, maxRadius(texture));
+        const double h = settings.step;
+        // A voxel's window reads copies of spots up to P away each way (+1 sample: a copy between
+        // two samples is shared by both).
+        mTail = mN + int(std::ceil(mSpacing / h)) + 1;
+        mRamp = 0.5 * double(mOriented ? mN : 2 * mN) * h + maxRadius(texture) + 0.5;
+        for (int g = 0; g < mFrames; ++g)
+            for (int m = 0; m < 2; ++m) {
+                const double a = (double(g) / double(mFrames) - double(m)) * mSpacing;
+                mCopyShift.push_back(a / h);
+                mCopyFade.push_back(cometFade(a, mSpacing));
+            }
+    }
     const double maxLen = settings.maxStreamline > 0 ? settings.maxStreamline : std::max(8.0 * settings.length, 200.0);
-    mTrace.maxSamples = std::max(2 * mN + settings.coveredRun, int(std::lround(maxLen / settings.step)));
+    mTrace.maxSamples = std::max(2 * mTail + settings.coveredRun, int(std::lround(maxLen / settings.step)));
+}
+
+template<typename Texture, bool Ripple>
+double FastLines<Texture, Ripple>::maxRadius(const Texture& texture)
+{
+    if constexpr (requires(const Texture& t) { t.radius(0); }) {
+        double r = 0;
+        for (int c = 0; c < C; ++c) r = std::max(r, texture.radius(c));
+        return r;
+    } else {
+        throw InputError("comet loops need spot input");
+    }
 }
 
 template<typename Texture, bool Ripple>
@@ -202,11 +254,11 @@ bool FastLines<Texture, Ripple>::onSample(Side& st, const openvdb::Vec3d& p)
     if (st.tail >= 0) return --st.tail > 0;
     if (l < 0 && !sc.index.inside(ijk)) {
         // Left the brick: trace on only to complete the windows of the samples inside.
-        st.tail = mN - 1;
+        st.tail = mTail - 1;
         return st.tail > 0;
     }
     st.run = (l < 0 || sc.hits[std::size_t(l)] >= mMinHits) ? st.run + 1 : 0;
-    if (st.run >= mSettings.coveredRun) st.tail = mN; // finish the window, then stop
+    if (st.run >= mSettings.coveredRun) st.tail = mTail; // finish the window, then stop
     return true;
 }
 
@@ -224,14 +276,20 @@ void FastLines<Texture, Ripple>::traceAndDeposit(std::int64_t seedLocal, const o
         [&](const openvdb::Vec3d& p) { return onSample(fwd, p); });
     auto natural = [](StopReason why) { return why == StopReason::Boundary || why == StopReason::ZeroVelocity; };
     const std::size_t B = sc.idxB.size(), N = assemble(seedLocal, ijk);
-    convolveLine(N);
     // Samples whose window runs past an artificial end (length limit, early stop, brick exit)
     // are not deposited; near a natural end the window is truncated exactly as in the naive
-    // engine. The exp kernel only looks downstream, so the upstream end never cuts a window.
-    const std::size_t n = std::size_t(mN);
-    const std::size_t lo = (natural(whyB) || mOriented) ? 0 : std::min(B, n);
-    const std::size_t hi = natural(whyF) ? N - 1 : std::max(B, N - 1 - n);
-    deposit(lo, hi);
+    // engine. The exp kernel only looks downstream, so the upstream end never cuts a window;
+    // comets come from up to P either way.
+    const std::size_t n = std::size_t(mTail);
+    const std::size_t lo = (natural(whyB) || (mOriented && mFrames == 0)) ? 0 : std::min(B, n);
+    const std::size_t hi = natural(whyF) ? N - 1 : std::max(B, N - 1 - std::min(N - 1, n));
+    if (mFrames > 0) {
+        convolveComets(N, natural(whyB), natural(whyF));
+        depositComets(lo, hi);
+    } else {
+        convolveLine(N);
+        deposit(lo, hi);
+    }
     samples += N;
     ++streamlines;
 }
@@ -317,6 +375,105 @@ void FastLines<Texture, Ripple>::deposit(std::size_t lo, std::size_t hi)
         const std::size_t s = std::size_t(l);
         float* acc = &sc.sum[s * K];
         for (int k = 0; k < K; ++k) acc[k] += float(w * o[k]);
+        sc.weight[s] += float(w);
+        if (sc.hits[s] < 255) ++sc.hits[s];
+        ++deposits;
+    }
+}
+
+template<typename Texture, bool Ripple>
+void FastLines<Texture, Ripple>::convolveComets(std::size_t N, bool endBack, bool endFwd)
+{
+    if constexpr (requires(const Texture& t, const openvdb::Vec3d& p) {
+                      t.centre(0u);
+                      t.forEachSpot(p, [](std::uint32_t, const float*, const float*) {});
+                  }) { // spot textures
+        // Sample-major: row i holds every frame's P values (frame f at f·P), so one pass of the
+        // window sums serves every frame. Only rows some copy reached are non-zero; they are
+        // cleared again after use, so the array is zeroed once, not per line.
+        const std::size_t F = std::size_t(mFrames), Wf = F * std::size_t(P);
+        if (sc.moved.size() < N * Wf) sc.moved.resize(N * Wf, 0.0);
+        sc.norm.resize(N);
+        windowSums(mSettings.kernel, mSettings.decay, mN, N, 0, nullptr, nullptr, sc.norm.data(), sc.scratch);
+        const double h = mSettings.step;
+        // Natural ends lie half a step past the end samples; a copy nearing one fades out over
+        // half a comet (copies past it do not exist), as in the splat engine.
+        const double back = endBack ? -0.5 : -1e300, fwd = endFwd ? double(N) - 0.5 : 1e300;
+        std::size_t lo = N, hi = 0;
+        for (std::size_t i = 0; i < N; ++i) {
+            mTexture.forEachSpot(sc.idx[i], [&](std::uint32_t s, const float* v, const float* g) {
+                const std::size_t phase = std::size_t(cometPhase(mTexture.centre(s), mFrames));
+                for (std::size_t f = 0; f < F; ++f) {
+                    const std::size_t ph = (f + phase) % F;
+                    for (std::size_t m = 0; m < 2; ++m) {
+                        double amp = mCopyFade[2 * ph + m];
+                        if (!(amp > 0)) continue;
+                        const double j = double(i) + mCopyShift[2 * ph + m];
+                        if (endBack || endFwd) amp *= std::clamp(std::min(fwd - j, j - back) * h / mRamp, 0.0, 1.0);
+                        if (!(amp > 0)) continue;
+                        // Shared by the two samples around arc j, linearly.
+                        const double j0 = std::floor(j), t = j - j0;
+                        for (int e = 0; e < 2; ++e) {
+                            const double at = j0 + double(e), w = amp * (e ? t : 1.0 - t);
+                            if (at < 0 || at >= double(N) || w == 0) continue;
+                            const std::size_t r = std::size_t(at);
+                            lo = std::min(lo, r);
+                            hi = std::max(hi, r);
+                            double* o = &sc.moved[r * Wf + f * std::size_t(P)];
+                            for (int c = 0; c < C; ++c) o[c] += w * v[c];
+                            for (int c = 0; c < 3 * C; ++c) o[C + c] += w * g[c];
+                        }
+                    }
+                }
+            });
+        }
+        if (lo > hi) { // no copy on this line: every frame's windows are 0
+            mWinLo = 1;
+            mWinHi = 0;
+            return;
+        }
+        // Windows are zero outside lo − n … hi + n; summed over that stretch alone they are the
+        // same numbers as over the whole line (the rows beyond are exact zeros).
+        const std::size_t n = std::size_t(mN);
+        mWinLo = lo >= n ? lo - n : 0;
+        mWinHi = std::min(N - 1, hi + n);
+        const std::size_t M = mWinHi - mWinLo + 1;
+        sc.movedWin.resize(M * Wf);
+        sc.subNorm.resize(M);
+        windowSums(mSettings.kernel, mSettings.decay, mN, M, int(Wf), &sc.moved[mWinLo * Wf], sc.movedWin.data(),
+                   sc.subNorm.data(), sc.scratch);
+        std::fill(sc.moved.begin() + std::ptrdiff_t(lo * Wf), sc.moved.begin() + std::ptrdiff_t((hi + 1) * Wf), 0.0);
+    } else {
+        (void)N, (void)endBack, (void)endFwd;
+        throw InputError("comet loops need spot input");
+    }
+}
+
+template<typename Texture, bool Ripple>
+void FastLines<Texture, Ripple>::depositComets(std::size_t lo, std::size_t hi)
+{
+    const std::size_t F = std::size_t(mFrames), Wf = F * std::size_t(P), Kc = F * std::size_t(C);
+    for (std::size_t i = lo; i <= hi; ++i) {
+        const std::int64_t l = sc.loc[i];
+        if (l < 0) continue;
+        const std::size_t s = std::size_t(l);
+        // As deposit(): the first-order correction to the voxel centre, proximity-weighted.
+        const openvdb::Vec3d off = OutputDomain::nearestVoxel(sc.idx[i]).asVec3d() - sc.idx[i];
+        const double r2 = 1.0 + off.lengthSqr() * kDepositFalloff;
+        const double w = 1.0 / (r2 * r2);
+        if (i >= mWinLo && i <= mWinHi) { // elsewhere every frame's window is 0
+            const double inv = 1.0 / sc.norm[i];
+            float* acc = &sc.sum[s * Kc];
+            const double* Wr = &sc.movedWin[(i - mWinLo) * Wf];
+            for (std::size_t f = 0; f < F; ++f) {
+                const double* Wi = Wr + f * std::size_t(P);
+                for (int c = 0; c < C; ++c) {
+                    const double* g = Wi + C + 3 * c;
+                    acc[f * std::size_t(C) + std::size_t(c)] +=
+                        float(w * (Wi[c] + g[0] * off[0] + g[1] * off[1] + g[2] * off[2]) * inv);
+                }
+            }
+        }
         sc.weight[s] += float(w);
         if (sc.hits[s] < 255) ++sc.hits[s];
         ++deposits;

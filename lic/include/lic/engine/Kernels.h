@@ -5,6 +5,8 @@
 
 #include "lic/engine/Settings.h"
 
+#include <openvdb/math/Vec3.h>
+
 #include <cstddef>
 #include <vector>
 
@@ -20,6 +22,14 @@ double spotPeak(const LicSettings& settings, double radius);
 /// footprint `maxRadius` (a halo's radius), so that consecutive comets, halos included, stand apart
 /// with a gap about their own width. Each comet moves P / frames output voxels per frame.
 double cometSpacing(const LicSettings& settings, double maxRadius);
+/// Amplitude of a comet copy at arc a of a train of spacing P: cos²(πa / 2P) for |a| < P, else 0.
+/// The two copies inside (−P, P) at any phase sum to 1 (cos² + sin²), so a line carries the same
+/// ink in every frame and comets fade in upstream and out downstream instead of popping.
+double cometFade(double a, double spacing);
+/// A spot's comet phase for N frames: a hash of its centre, so it does not depend on the order or
+/// the subset of spots a process holds. Frame f (from 0) shows phase (f + phase) mod N, whose
+/// copies sit at arcs (g/N − m)·P, m = 0, 1 (docs/technique.md §8).
+int cometPhase(const openvdb::Vec3d& centre, int frames);
 
 namespace detail {
 

@@ -48,7 +48,7 @@ struct LicSettings
     /// Also produce the ripple sums a cyclic animation is composed from (either kernel; see
     /// composite/Animation.h). The result then has 3·C + 2 channels.
     bool ripple = false;
-    /// Spot loops of the splat engine: this many frames of travelling comets (0 = none; see
+    /// Spot loops of the splat and fast engines: this many frames of travelling comets (0 = none; see
     /// engine/Splat.h CometTables and docs/technique.md §8). The result then has comets · C channels,
     /// frame-major (frame f's channel c at f·C + c). Excludes `ripple`.
     int comets = 0;

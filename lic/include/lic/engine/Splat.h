@@ -113,9 +113,6 @@ private:
     std::vector<float> mTable; // [tau][d][phase][channel]
 };
 
-/// A spot's comet phase for N frames: a hash of its centre, so it does not depend on the order or
-/// the subset of spots a process holds.
-int cometPhase(const openvdb::Vec3d& centre, int frames);
 
 /// The splat engine's entry in the engine table: the same channels a gather engine delivers for
 /// spots (2K, or 3·2K + 2 for a loop), brick by brick, only for bricks some spot's footprint

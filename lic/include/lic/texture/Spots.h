@@ -159,6 +159,39 @@ public:
     {
         double v[kChannels] = {};
         double g[3 * kChannels] = {};
+        visit(p, [&](std::uint32_t s, const openvdb::Vec3d& delta, double d) {
+            add(s, delta, d, v, grad ? g : nullptr);
+        });
+        for (int k = 0; k < kChannels; ++k) out[k] = float(v[k]);
+        if (grad)
+            for (int k = 0; k < 3 * kChannels; ++k) grad[k] = float(g[k]);
+    }
+
+    /// sampleGradient one spot at a time: fn(spot index, values[kChannels], gradients[3·kChannels])
+    /// for every spot that reaches p, in a fixed order (the fast engine's comet loops give each
+    /// spot's part its own phase). The parts sum to sampleGradient's values (to rounding).
+    template<typename Fn>
+    void forEachSpot(const openvdb::Vec3d& p, Fn&& fn) const
+    {
+        visit(p, [&](std::uint32_t s, const openvdb::Vec3d& delta, double d) {
+            double v[kChannels] = {};
+            double g[3 * kChannels] = {};
+            add(s, delta, d, v, g);
+            float vf[kChannels], gf[3 * kChannels];
+            for (int k = 0; k < kChannels; ++k) vf[k] = float(v[k]);
+            for (int k = 0; k < 3 * kChannels; ++k) gf[k] = float(g[k]);
+            fn(s, static_cast<const float*>(vf), static_cast<const float*>(gf));
+        });
+    }
+
+    /// Centre of spot s (output index).
+    const openvdb::Vec3d& centre(std::uint32_t s) const { return mSpots.centers[s]; }
+
+private:
+    /// fn(spot, p − centre, distance) for every spot within reach of p, in a fixed order.
+    template<typename Fn>
+    void visit(const openvdb::Vec3d& p, Fn&& fn) const
+    {
         const std::array<int, 3> c0{int(std::floor(p[0] / mCell - 0.5)), int(std::floor(p[1] / mCell - 0.5)),
                                     int(std::floor(p[2] / mCell - 0.5))};
         for (int dx = 0; dx < 2; ++dx)
@@ -174,27 +207,28 @@ public:
                         const openvdb::Vec3d delta = p - mSpots.centers[s];
                         const double d2 = delta.lengthSqr();
                         if (d2 >= mReach2) continue;
-                        const double d = std::sqrt(d2);
-                        const double a = mSpots.weights[s];
-                        for (int k = 0; k < kChannels; ++k) {
-                            double slope;
-                            const double f = spotProfile(d, mRadius[k], slope);
-                            v[k] += a * f;
-                            if (grad && slope != 0.0 && d > 0.0) {
-                                const double q = a * slope / d;
-                                g[3 * k] += q * delta[0];
-                                g[3 * k + 1] += q * delta[1];
-                                g[3 * k + 2] += q * delta[2];
-                            }
-                        }
+                        fn(s, delta, std::sqrt(d2));
                     }
                 }
-        for (int k = 0; k < kChannels; ++k) out[k] = float(v[k]);
-        if (grad)
-            for (int k = 0; k < 3 * kChannels; ++k) grad[k] = float(g[k]);
     }
 
-private:
+    /// Add spot s's channel values (and gradients, if g) at offset delta, distance d, to v (g).
+    void add(std::uint32_t s, const openvdb::Vec3d& delta, double d, double* v, double* g) const
+    {
+        const double a = mSpots.weights[s];
+        for (int k = 0; k < kChannels; ++k) {
+            double slope;
+            const double f = spotProfile(d, mRadius[k], slope);
+            v[k] += a * f;
+            if (g && slope != 0.0 && d > 0.0) {
+                const double q = a * slope / d;
+                g[3 * k] += q * delta[0];
+                g[3 * k + 1] += q * delta[1];
+                g[3 * k + 2] += q * delta[2];
+            }
+        }
+    }
+
     std::array<int, 3> cellCoord(const openvdb::Vec3d& p) const
     {
         return {int(std::floor(p[0] / mCell)), int(std::floor(p[1] / mCell)), int(std::floor(p[2] / mCell))};
