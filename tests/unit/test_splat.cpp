@@ -339,35 +339,35 @@ TEST(SplatComets, MoveDownstreamInTheTabbedJet)
     const SpotSet set = poissonSpots(domain, 8.0, 11);
     std::vector<std::vector<float>> splatFrames;
     for (EngineType e : {EngineType::Splat, EngineType::Fast}) {
-    LicSettings s;
-    s.engine = e;
-    s.length = 6;
-    s.comets = 8;
-    const LicResult r = convolveSpots(field, domain, set, {1.5}, 2.0, s);
-    if (e == EngineType::Splat) {
-        splatFrames = r.channels;
-    } else {
-        for (int f = 0; f < 8; ++f) {
-            const double c = correlation(domain, splatFrames[std::size_t(2 * f)], r.channels[std::size_t(2 * f)]);
-            std::printf("tabbed jet frame %d: fast vs splat correlation %.3f\n", f + 1, c);
-            EXPECT_GT(c, 0.9) << "frame " << f + 1;
+        LicSettings s;
+        s.engine = e;
+        s.length = 6;
+        s.comets = 8;
+        const LicResult r = convolveSpots(field, domain, set, {1.5}, 2.0, s);
+        if (e == EngineType::Splat) {
+            splatFrames = r.channels;
+        } else {
+            for (int f = 0; f < 8; ++f) {
+                const double c = correlation(domain, splatFrames[std::size_t(2 * f)], r.channels[std::size_t(2 * f)]);
+                std::printf("tabbed jet frame %d: fast vs splat correlation %.3f\n", f + 1, c);
+                EXPECT_GT(c, 0.9) << "frame " << f + 1;
+            }
         }
-    }
-    const std::size_t V = r.channels[0].size();
-    std::vector<float> mean(V, 0.0f);
-    for (int f = 0; f < 8; ++f)
-        for (std::size_t i = 0; i < V; ++i) mean[i] += r.channels[std::size_t(2 * f)][i] / 8.0f;
-    std::vector<std::vector<float>> moving(8, std::vector<float>(V));
-    for (int f = 0; f < 8; ++f)
-        for (std::size_t i = 0; i < V; ++i) moving[std::size_t(f)][i] = r.channels[std::size_t(2 * f)][i] - mean[i];
-    const double expect = cometSpacing(s, 3.0) / 8.0;
-    for (int f = 0; f < 8; ++f) {
-        const double shift = bestShift(field, domain, moving[std::size_t(f)], moving[std::size_t((f + 1) % 8)]);
-        std::printf("%s tabbed jet frame %d -> %d: best shift along the flow %.3f (P/N %.3f)\n", toString(e), f + 1,
-                    (f + 1) % 8 + 1, shift, expect);
-        EXPECT_GT(shift, 0.5 * expect) << toString(e) << " pair " << f + 1;
-        EXPECT_LT(shift, 1.5 * expect + 1.0) << toString(e) << " pair " << f + 1;
-    }
+        const std::size_t V = r.channels[0].size();
+        std::vector<float> mean(V, 0.0f);
+        for (int f = 0; f < 8; ++f)
+            for (std::size_t i = 0; i < V; ++i) mean[i] += r.channels[std::size_t(2 * f)][i] / 8.0f;
+        std::vector<std::vector<float>> moving(8, std::vector<float>(V));
+        for (int f = 0; f < 8; ++f)
+            for (std::size_t i = 0; i < V; ++i) moving[std::size_t(f)][i] = r.channels[std::size_t(2 * f)][i] - mean[i];
+        const double expect = cometSpacing(s, 3.0) / 8.0;
+        for (int f = 0; f < 8; ++f) {
+            const double shift = bestShift(field, domain, moving[std::size_t(f)], moving[std::size_t((f + 1) % 8)]);
+            std::printf("%s tabbed jet frame %d -> %d: best shift along the flow %.3f (P/N %.3f)\n", toString(e), f + 1,
+                        (f + 1) % 8 + 1, shift, expect);
+            EXPECT_GT(shift, 0.5 * expect) << toString(e) << " pair " << f + 1;
+            EXPECT_LT(shift, 1.5 * expect + 1.0) << toString(e) << " pair " << f + 1;
+        }
     }
 }
 
