@@ -283,9 +283,14 @@ void transports(const VelocityField& field, const OutputDomain& domain, const st
     for (int j = centre - 1; j >= 0; --j) M[std::size_t(j)] = step(J[std::size_t(j + 1)], -hWorld) * M[std::size_t(j + 1)];
     out.resize(std::size_t(n));
     for (int j = 0; j < n; ++j) {
+        // M⁻¹ as Mat3::inverse() computes it (adjoint / determinant), but without its throw: that
+        // determinant (expanded by column) can be exactly 0 where det() (by row) is not, for a
+        // transport squeezed to nothing whose entries are large.
+        const Mat3d& Mj = M[std::size_t(j)];
+        const Mat3d adj = Mj.adjoint();
+        const double det = Mj.det(), detInv = adj(0, 0) * Mj(0, 0) + adj(0, 1) * Mj(1, 0) + adj(0, 2) * Mj(2, 0);
         Mat3d G = Mat3d::identity();
-        const double det = M[std::size_t(j)].det();
-        if (std::abs(det) > 1e-12) G = Ainv * M[std::size_t(j)].inverse() * A;
+        if (std::abs(det) > 1e-12 && detInv != 0.0 && std::isfinite(detInv)) G = Ainv * (adj * (1.0 / detInv)) * A;
         else G = Mat3d::identity() * 1e6; // lines squeezed to nothing: push every voxel out of reach
         for (int a = 0; a < 3; ++a)
             for (int b = 0; b < 3; ++b) out[std::size_t(j)][std::size_t(b * 3 + a)] = float(G[a][b]);
