@@ -520,3 +520,25 @@ TEST_F(StreamBake, ASpotLoopThroughSqueezedLinesBakes)
         EXPECT_GT(lit, 1000u) << "frame " << frame;
     }
 }
+
+TEST_F(StreamBake, ALoopTooBigForMemoryIsRefusedBeforeItStarts)
+{
+    // 10 000 frames of three widths with halos: 60 000 values per voxel of a 64³ brick, on every
+    // thread. Refused when planned, with the figures and what to change, and nothing written.
+    ASSERT_EQ(0, ::setenv("LICVDB_READ_MEMORY_MB", "4096", 1));
+    auto r = spotRecipe("too_many_frames.vdb");
+    r.lic.brick = 64;
+    r.animation.frames = 10000;
+    try {
+        vdbexport::bake(r);
+        ADD_FAILURE() << "a 10000-frame comet loop was not refused";
+    } catch (const lic::InputError& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find("animation.frames"), std::string::npos) << what;
+        EXPECT_NE(what.find("60000 values per voxel"), std::string::npos) << what;
+        EXPECT_NE(what.find("(4 GiB)"), std::string::npos) << what;
+    }
+    ::unsetenv("LICVDB_READ_MEMORY_MB");
+    for (const auto& entry : fs::directory_iterator(sDir))
+        EXPECT_EQ(entry.path().filename().string().find("too_many_frames"), std::string::npos) << entry.path();
+}

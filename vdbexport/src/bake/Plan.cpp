@@ -1,14 +1,16 @@
 #include "Plan.h"
 
 #include "vdbexport/bake/Outputs.h"
+#include "vdbexport/io/VdbCheck.h"
 
 #include "lic/util/Error.h"
 #include "lic/engine/Engine.h"
 #include "lic/engine/Kernels.h"
 
 #include <algorithm>
-
+#include <cmath>
 #include <filesystem>
+#include <thread>
 
 namespace vdbexport::pipeline {
 
@@ -71,6 +73,25 @@ void checkOutputDirectory(const std::string& out)
     }
 }
 
+/// A comet loop's brick holds frames · C sums per voxel (and as many outputs) on each thread:
+/// refuse one that could not fit in this machine's memory before reading anything, rather than
+/// failing (or being killed) on the first brick. Ripple loops and stills hold a few per voxel.
+void checkLoopFits(const Plan& p)
+{
+    if (p.settings.comets <= 0) return;
+    const double dim = double(lic::brickDim(p.settings));
+    const int threads = p.recipe.threads > 0 ? p.recipe.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+    const double bytes = dim * dim * dim * double(p.rawChannels) * 2.0 * sizeof(float) * double(threads);
+    const std::uint64_t limit = readMemoryLimitBytes();
+    if (limit == 0 || bytes <= double(limit)) return;
+    auto gib = [](double b) { return std::to_string(int(std::ceil(b / double(1u << 30)))); };
+    throw lic::InputError("animation.frames: a loop of " + std::to_string(p.frames) + " frames of spots keeps " +
+                          std::to_string(p.rawChannels) + " values per voxel of each " + std::to_string(int(dim)) +
+                          "^3 brick being convolved: about " + gib(bytes) + " GiB on " + std::to_string(threads) +
+                          " threads, more than this machine's memory (" + gib(double(limit)) +
+                          " GiB); use fewer frames, smaller bricks (lic.brick) or fewer threads");
+}
+
 } // namespace
 
 Plan makePlan(const Recipe& recipe)
@@ -114,6 +135,7 @@ Plan makePlan(const Recipe& recipe)
     p.levels = int(recipe.input.radii.size());
     p.textureChannels = p.spots ? 2 * p.levels : 1;
     p.rawChannels = s.outputChannels(p.textureChannels);
+    checkLoopFits(p);
     p.linePeak.assign(std::size_t(p.levels), 1.0);
     p.haloPeak.assign(std::size_t(p.levels), 1.0);
     if (p.spots && p.stretch) {
