@@ -135,11 +135,14 @@ float fromKey(std::uint32_t k) { return std::bit_cast<float>((k & 0x80000000u) ?
 
 using Histogram = std::vector<std::uint64_t>;
 
-/// A histogram of `bins` bins over the finite samples at every active output voxel: `add(key, h)`
-/// counts a sample's order key into h.
-template<typename Add>
+/// A histogram of `bins` bins over the finite samples at the active output voxels:
+/// `add(key, h, i)` counts the sample's order key into h, i numbering the voxels (blocks in
+/// order, each block's voxels in mask order, from `first[block]`); `sample(i)` says whether voxel
+/// i is sampled at all.
+template<typename Sample, typename Add>
 Histogram histogram(const ScalarField& scalar, const OutputDomain& domain, int threads, std::size_t bins,
-                    const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce, Add add)
+                    const std::vector<std::uint32_t>* blocks, const std::vector<std::size_t>& first,
+                    const HistogramReduce& reduce, Sample sample, Add add)
 {
     tbb::combinable<Histogram> parts([bins] { return Histogram(bins, 0); });
     const std::size_t count = blocks ? blocks->size() : domain.blockCount();
@@ -149,11 +152,13 @@ Histogram histogram(const ScalarField& scalar, const OutputDomain& domain, int t
             Histogram& h = parts.local();
             for (std::size_t i = r.begin(); i != r.end(); ++i) {
                 const std::size_t b = blocks ? (*blocks)[i] : i;
+                std::size_t voxel = first[i];
                 const auto& mask = domain.blockMask(b);
-                for (auto on = mask.beginOn(); on; ++on) {
+                for (auto on = mask.beginOn(); on; ++on, ++voxel) {
+                    if (!sample(voxel)) continue;
                     const std::size_t off = on.pos();
                     const float v = scalar.at(domain.worldOf(domain.coordOf(b * OutputDomain::kBlockVoxels + off)));
-                    if (std::isfinite(v)) add(orderKey(v), h);
+                    if (std::isfinite(v)) add(orderKey(v), h, voxel);
                 }
             }
         });
@@ -188,22 +193,39 @@ std::array<double, 2> autoRange(const ScalarField& scalar, const OutputDomain& d
                                 const std::vector<std::uint32_t>* blocks, const HistogramReduce& reduce)
 {
     constexpr std::size_t kBins = 65536;
-    const Histogram coarse = histogram(scalar, domain, threads, kBins, blocks, reduce,
-                                       [](std::uint32_t key, Histogram& h) { ++h[key >> 16]; });
+    // Where each block's voxels start in a per-voxel numbering. While the volume is small enough
+    // (2 bytes a voxel, at most 64 MiB), the first pass keeps each voxel's high key, so that the
+    // second samples only the voxels of the two bins that hold the percentiles.
+    constexpr std::size_t kKeepLimit = std::size_t(1) << 25;
+    const std::size_t count = blocks ? blocks->size() : domain.blockCount();
+    std::vector<std::size_t> first(count + 1, 0);
+    for (std::size_t i = 0; i < count; ++i)
+        first[i + 1] = first[i] + domain.blockMask(blocks ? (*blocks)[i] : i).countOn();
+    const bool keep = first[count] <= kKeepLimit;
+    std::vector<std::uint16_t> high(keep ? first[count] : 0);
+    auto all = [](std::size_t) { return true; };
+    const Histogram coarse = histogram(scalar, domain, threads, kBins, blocks, first, reduce, all,
+                                       [&](std::uint32_t key, Histogram& h, std::size_t voxel) {
+                                           ++h[key >> 16];
+                                           if (keep) high[voxel] = std::uint16_t(key >> 16);
+                                       });
     std::uint64_t n = 0;
     for (std::uint64_t c : coarse) n += c;
     if (n == 0) return {0.0, 1.0};
     // Rank of the q-quantile as std::nth_element would pick it: round(q · (n − 1)).
     auto rankOf = [&](double q) { return std::min(n - 1, std::uint64_t(q * double(n - 1) + 0.5)); };
     const std::uint64_t ranks[2] = {rankOf(0.01), rankOf(0.99)};
-    // Second pass: the low 16 bits of the keys inside each percentile's coarse bin.
+    // Second pass: the low 16 bits of the keys inside each percentile's coarse bin. (A voxel whose
+    // kept high key matches is sampled again; one whose value was not finite is skipped again.)
     const auto [bin0, below0] = binOfRank(coarse, ranks[0]);
     const auto [bin1, below1] = binOfRank(coarse, ranks[1]);
     const std::uint32_t hb[2] = {std::uint32_t(bin0), std::uint32_t(bin1)};
-    const Histogram fine = histogram(scalar, domain, threads, 2 * kBins, blocks, reduce, [&hb](std::uint32_t key, Histogram& h) {
-        for (std::size_t i = 0; i < 2; ++i)
-            if ((key >> 16) == hb[i]) ++h[i * kBins + (key & 0xffffu)];
-    });
+    auto inBins = [&](std::size_t voxel) { return !keep || high[voxel] == hb[0] || high[voxel] == hb[1]; };
+    const Histogram fine = histogram(scalar, domain, threads, 2 * kBins, blocks, first, reduce, inBins,
+                                     [&hb](std::uint32_t key, Histogram& h, std::size_t) {
+                                         for (std::size_t i = 0; i < 2; ++i)
+                                             if ((key >> 16) == hb[i]) ++h[i * kBins + (key & 0xffffu)];
+                                     });
     const std::uint64_t below[2] = {below0, below1};
     std::array<double, 2> out{};
     for (std::size_t i = 0; i < 2; ++i) {
