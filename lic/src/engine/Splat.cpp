@@ -168,7 +168,7 @@ CometTables::CometTables(const SplatTables& still, const LicSettings& settings, 
     mNTau = int(std::ceil((mTauMax - mTauMin) / mDTau)) + 1;
     mND = int(std::ceil(mReach / mDD)) + 2;
     for (int g = 0; g < mN; ++g)
-        for (int m = 0; m < 2; ++m) mFade.push_back(fade(copyArc(g, m)));
+        for (int m = 0; m < 2; ++m) mFade.push_back(cometFade(copyArc(g, m), mP));
     const std::size_t row = std::size_t(mN) * std::size_t(mC);
     mTable.assign(std::size_t(mNTau) * std::size_t(mND) * row, 0.0f);
     tbb::parallel_for(0, mNTau, [&](int t) {
@@ -185,8 +185,6 @@ CometTables::CometTables(const SplatTables& still, const LicSettings& settings, 
         }
     });
 }
-
-double CometTables::fade(double a) const { return cometFade(a, mP); }
 
 CometTables::Corners CometTables::corners(double tau, double d, float a) const
 {

@@ -69,7 +69,7 @@ private:
 
 /// Comet loops (LicSettings::comets = N frames): every spot's streamline carries a train of
 /// comets, copies of the spot at arcs a spaced P apart (cometSpacing()), moving P/N downstream per
-/// frame, so frame N+1 is frame 1. A copy at arc a has amplitude fade(a) = cos²(πa / 2P) for
+/// frame, so frame N+1 is frame 1. A copy at arc a has amplitude cometFade(a, P) = cos²(πa / 2P) for
 /// |a| < P, else 0: at every phase the two copies inside (−P, P) sum to the spot's own weight
 /// (cos² + sin² = 1), so a line carries the same ink in every frame, and comets fade in upstream
 /// and out downstream instead of popping. Each copy's footprint is the still's W(τ − a, d), so a
@@ -86,7 +86,7 @@ public:
     double spacing() const { return mP; }
     /// Arc of copy m (0 or 1) at phase g.
     double copyArc(int g, int m) const { return (double(g) / double(mN) - double(m)) * mP; }
-    /// fade(copyArc(g, m)), precomputed.
+    /// cometFade(copyArc(g, m), P), precomputed.
     double copyFade(int g, int m) const { return mFade[std::size_t(2 * g + m)]; }
     double tauMin() const { return mTauMin; }
     double tauMax() const { return mTauMax; }
@@ -103,8 +103,6 @@ private:
         std::array<float, 4> w{};
     };
     Corners corners(double tau, double d, float a) const;
-    /// Amplitude of a copy at arc a (0 for |a| ≥ P).
-    double fade(double a) const;
 
     int mN, mC;
     double mP, mTauMin, mTauMax, mReach, mDTau, mDD;
