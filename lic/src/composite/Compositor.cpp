@@ -73,6 +73,10 @@ Compositor::Compositor(const CompositeSettings& settings, CompositeInputs inputs
     if (s.spots && s.writeInput) mInputSpots.emplace(*mInputs.spots, std::array<double, 1>{s.inputRadius}, s.haloScale);
     mMoments.assign(layout.size(), Moments{});
     for (int f = 1; f <= s.frames; ++f) mPhases.emplace_back(f, s.frames);
+    for (int k = 0; k < s.levels; ++k) {
+        mMaxInvPeak = std::max(mMaxInvPeak, float(1.0 / s.linePeak[std::size_t(k)]));
+        mMaxInvPeak = std::max(mMaxInvPeak, float(1.0 / s.haloPeak[std::size_t(k)]));
+    }
 }
 
 template<typename Raw>
@@ -162,6 +166,16 @@ bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::siz
         return composeSpots([&](int c) { return loopFrameValue(mSettings, raw, c, f, ph); }, widthT, roi);
     };
     auto showsIn = [](const SpotVoxel& sv) { return sv.density > kSparseEpsilon || sv.halo > kSparseEpsilon; };
+    if (frames > 1 && mSettings.comets) {
+        // Most voxels a comet loop touches show in no frame: rule them out from the largest raw
+        // value before composing N frames. Every composed value is a clamped, blended (convex)
+        // mix of raw × 1/peak ≤ the bound, times roi; the 0.99 keeps float rounding of the blend
+        // from reaching the threshold, so a voxel is ruled out only where no frame could show.
+        const int n = frames * mSettings.textureChannels();
+        float top = raw(0);
+        for (int c = 1; c < n; ++c) top = std::max(top, raw(c));
+        if (top * mMaxInvPeak * roi <= 0.99f * kSparseEpsilon) return false;
+    }
     // Kept when any frame of the loop shows line or halo here, so every frame file has the same
     // topology.
     const SpotVoxel first = frameVoxel(1);
