@@ -129,11 +129,22 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
     const int R = s.rawChannels(), frames = s.frames;
     const NoiseTexture* noise = (!s.spots && s.writeInput) ? &(*mInputs.noise)(*bc.brick) : nullptr;
 
+    // Spots composed on arrival (stills, comet loops): most voxels a footprint touches show in no
+    // frame; rule them out from their largest raw value before looking up scalars and composing.
+    // Every composed value is a clamped, blended (convex) mix of raw × 1/peak ≤ that bound, times
+    // roi ≤ 1; the 0.99 keeps float rounding of the blend from reaching the threshold, so a voxel
+    // is ruled out only where keepSpotVoxel would drop it too.
+    const int boundChannels = s.spots && s.composesOnArrival() ? frames * s.textureChannels() : 0;
     for (auto on = mDomain.blockMask(b).beginOn(); on; ++on) {
         const openvdb::Index off = on.pos();
+        auto raw = [&](int c) { return bc.block(i, c)[off]; };
+        if (boundChannels > 0) {
+            float top = raw(0);
+            for (int c = 1; c < boundChannels; ++c) top = std::max(top, raw(c));
+            if (top * mMaxInvPeak <= 0.99f * kSparseEpsilon) continue;
+        }
         const openvdb::Coord ijk = mDomain.coordOf(b * V + off);
         const openvdb::Vec3d world = mDomain.worldOf(ijk);
-        auto raw = [&](int c) { return bc.block(i, c)[off]; };
         float widthT = 0.0f;
         if (mInputs.width) {
             const double t = unitOf(mInputs.width, world, s.widthRange);
@@ -166,16 +177,6 @@ bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::siz
         return composeSpots([&](int c) { return loopFrameValue(mSettings, raw, c, f, ph); }, widthT, roi);
     };
     auto showsIn = [](const SpotVoxel& sv) { return sv.density > kSparseEpsilon || sv.halo > kSparseEpsilon; };
-    if (frames > 1 && mSettings.comets) {
-        // Most voxels a comet loop touches show in no frame: rule them out from the largest raw
-        // value before composing N frames. Every composed value is a clamped, blended (convex)
-        // mix of raw × 1/peak ≤ the bound, times roi; the 0.99 keeps float rounding of the blend
-        // from reaching the threshold, so a voxel is ruled out only where no frame could show.
-        const int n = frames * mSettings.textureChannels();
-        float top = raw(0);
-        for (int c = 1; c < n; ++c) top = std::max(top, raw(c));
-        if (top * mMaxInvPeak * roi <= 0.99f * kSparseEpsilon) return false;
-    }
     // Kept when any frame of the loop shows line or halo here, so every frame file has the same
     // topology.
     const SpotVoxel first = frameVoxel(1);

@@ -156,8 +156,8 @@ private:
     LeafSet<openvdb::FloatGrid> mInputLeaves, mScalarLeaves;
     LeafSet<openvdb::Vec3SGrid> mTangentLeaves, mVelocityLeaves, mColorLeaves;
     std::vector<FramePhase> mPhases; // a loop's frames 1 … N (ripple phases)
-    /// A comet loop's largest 1 / peak over every line and halo level (composeSpots' factors):
-    /// a voxel whose raw channels times it stay clear below kSparseEpsilon shows in no frame.
+    /// The largest 1 / peak over every line and halo level (composeSpots' factors): a voxel whose
+    /// raw channels times it stay clear below kSparseEpsilon shows in no frame.
     float mMaxInvPeak = 0.0f;
     openvdb::GridPtrVec mStatic;
     bool mStaticBuilt = false;
