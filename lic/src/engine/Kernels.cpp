@@ -57,11 +57,11 @@ void windowSums(KernelType kernel, double decay, int n, std::size_t N, int W, co
                 double* norm, std::vector<double>& scratch)
 {
     const std::size_t nn = std::size_t(n);
+    // N + 1 rows of W, of which only the one read before it is written is cleared (a comet loop's
+    // W = N·4C made clearing them all 6 % of its time); the scratch only grows.
+    if (scratch.size() < (N + 1) * std::size_t(W)) scratch.resize((N + 1) * std::size_t(W));
     if (kernel == KernelType::Box) {
-        // Prefix sums: every row is written before it is read but the first (P_0 = 0). Only that
-        // row is cleared: a comet loop's W = N·4C made clearing all of them 6 % of its time.
-        if (scratch.size() < (N + 1) * std::size_t(W)) scratch.resize((N + 1) * std::size_t(W)); // grows only
-        std::fill_n(scratch.begin(), W, 0.0);
+        std::fill_n(scratch.begin(), W, 0.0); // prefix sums, P_0 = 0
         for (std::size_t i = 0; i < N; ++i)
             for (int c = 0; c < W; ++c) scratch[(i + 1) * W + c] = scratch[i * W + c] + vals[i * W + c];
         for (std::size_t i = 0; i < N; ++i) {
@@ -71,9 +71,7 @@ void windowSums(KernelType kernel, double decay, int n, std::size_t N, int W, co
         }
         return;
     }
-    // E_i, with E_N = 0 (the only row read before it is written); the scratch grows only.
-    if (scratch.size() < (N + 1) * std::size_t(W)) scratch.resize((N + 1) * std::size_t(W));
-    std::fill_n(scratch.begin() + std::ptrdiff_t(N * std::size_t(W)), W, 0.0);
+    std::fill_n(scratch.begin() + std::ptrdiff_t(N * std::size_t(W)), W, 0.0); // E_i, with E_N = 0
     for (std::size_t i = N; i-- > 0;)
         for (int c = 0; c < W; ++c) scratch[i * W + c] = vals[i * W + c] + decay * scratch[(i + 1) * W + c];
     const double cn1 = std::pow(decay, double(n + 1));

@@ -718,15 +718,8 @@ void SplatRun::handOver(const Brick& brick, SplatScratch& sc, const BrickSink& s
         any = true;
         float* dst = sc.out.data() + i * K * V;
         const float* src = sc.acc.data() + lb * V * K;
-        // Eight channels at a time: a comet loop's K = N·C channel rows lie 2 KiB apart, and
-        // writing all of them per voxel thrashed the few L1 sets they share (the transpose took
-        // ~60 % of a 24-frame brick).
-        constexpr std::size_t kTile = 8;
-        for (std::size_t k0 = 0; k0 < K; k0 += kTile) {
-            const std::size_t k1 = std::min(K, k0 + kTile);
-            for (std::size_t off = 0; off < V; ++off)
-                for (std::size_t k = k0; k < k1; ++k) dst[k * V + off] = src[off * K + k];
-        }
+        detail::writeChannelMajor(
+            K, V, [](std::size_t j) { return j; }, [&](std::size_t j, std::size_t k) { return src[j * K + k]; }, dst);
     }
     if (any) sink(BrickChannels{brick.id, &brick, mK, sc.out.data(), sc.blockTouched.data()});
 }

@@ -16,6 +16,7 @@
 #include <tbb/partitioner.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -46,6 +47,23 @@ struct BrickChannels
 using BrickSink = std::function<void(const BrickChannels&)>;
 
 namespace detail {
+
+/// Writes one block of a brick channel-major, as BrickChannels holds it: dst[k·512 + off(j)] =
+/// value(j, k) for the voxels j < n and channels k < K. Eight channels at a time: with many
+/// channels (a comet loop's N·C) the rows lie 2 KiB apart, and writing all of them per voxel
+/// thrashed the few L1 sets they share (~60 % of a 24-frame splat brick).
+template<typename Off, typename Value>
+void writeChannelMajor(std::size_t K, std::size_t n, const Off& off, const Value& value, float* dst)
+{
+    constexpr std::size_t V = OutputDomain::kBlockVoxels, kTile = 8;
+    for (std::size_t k0 = 0; k0 < K; k0 += kTile) {
+        const std::size_t k1 = std::min(K, k0 + kTile);
+        for (std::size_t j = 0; j < n; ++j) {
+            const std::size_t o = off(j);
+            for (std::size_t k = k0; k < k1; ++k) dst[k * V + o] = value(j, k);
+        }
+    }
+}
 
 /// Run `work(position, brick, worker)` for the bricks at `positions` of `layout` (layout.positions() for
 /// all of them), in parallel, one

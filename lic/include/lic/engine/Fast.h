@@ -15,6 +15,7 @@
 // (docs/technique.md §8).
 #pragma once
 
+#include "lic/engine/Driver.h"
 #include "lic/engine/Kernels.h"
 #include "lic/engine/Settings.h"
 #include "lic/engine/Streamline.h"
@@ -187,16 +188,9 @@ void FastEngine::brick(const VelocityField& field, const OutputDomain& domain, c
             offs[n] = std::uint16_t(on.pos());
             invs[n++] = 1.0f / w;
         }
-        // Eight channels at a time: a comet loop's K = N·C rows lie 2 KiB apart, and writing all
-        // of them per voxel thrashes the few L1 sets they share.
-        for (int k0 = 0; k0 < K; k0 += 8) {
-            const int k1 = std::min(K, k0 + 8);
-            for (std::size_t j = 0; j < n; ++j) {
-                const std::size_t off = offs[j];
-                const float* src = &sc.sum[(base + off) * std::size_t(K)];
-                for (int k = k0; k < k1; ++k) dst[std::size_t(k) * V + off] = src[k] * invs[j];
-            }
-        }
+        detail::writeChannelMajor(
+            std::size_t(K), n, [&](std::size_t j) { return std::size_t(offs[j]); },
+            [&](std::size_t j, std::size_t k) { return sc.sum[(base + offs[j]) * std::size_t(K) + k] * invs[j]; }, dst);
     }
     stats.samples += lines.samples;
     stats.deposits += lines.deposits;
