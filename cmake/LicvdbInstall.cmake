@@ -124,7 +124,7 @@ package. find_package(licvdb) gives lic::lic (fields, streamlines, LIC engines,
 raycaster) and lic::vdbexport (recipes, readers, bakes to .vdb files).")
 # What licvdbConfig.cmake finds: the -dev packages of the public and the (static) private
 # dependencies (images need none: the image module comes with the licvdb package).
-set(_licvdb_dev_depends "licvdb (= ${PROJECT_VERSION}-1), libopenvdb-dev, libtbb-dev, libboost-iostreams-dev, libimath-dev, nlohmann-json3-dev, libssl-dev, zlib1g-dev, libblosc-dev")
+set(_licvdb_dev_depends "licvdb (= ${PROJECT_VERSION}-1), libopenvdb-dev, libtbb-dev, libboost-iostreams-dev, libimath-dev, nlohmann-json3-dev, libssl-dev, zlib1g-dev, libblosc-dev, liblog4cplus-dev")
 if(LICVDB_MPI)
   string(APPEND _licvdb_dev_depends ", libopenmpi-dev")
 endif()

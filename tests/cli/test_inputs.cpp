@@ -173,3 +173,23 @@ TEST_F(InputsTest, BlenderSmokeCacheBakes)
     // Output voxel = field voxel / upsample (2).
     EXPECT_NEAR(out["density"]->voxelSize()[0], in["velocity"]->voxelSize()[0] / 2, 1e-9);
 }
+
+// A field OpenVDB 13 wrote (VDB format 225: Blender 5's smoke caches and every tool on OpenVDB 13)
+// bakes like any other, and without OpenVDB 10's "unsupported VDB file format" warning on stderr
+// (licvdb has checked the file: only 13's new half grid type is refused, by name).
+TEST_F(InputsTest, OpenVdb13FieldBakesQuietly)
+{
+    const std::string field = std::string(LICVDB_SOURCE_DIR) + "/tests/inputs/openvdb13/velocity-v225.vdb";
+    const RunResult r = run({"bake", "--field", field, "--out", "v13.vdb", "--length", "6", "--color", "density", "--json"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    EXPECT_EQ(r.err.find("unsupported"), std::string::npos) << r.describe();
+    EXPECT_EQ(r.err.find("WARN"), std::string::npos) << r.describe();
+    const json summary = json::parse(r.out);
+    EXPECT_EQ(summary["field"]["grid"], "velocity");
+    auto out = readAll(work("v13.vdb"));
+    ASSERT_TRUE(out.count("density") && out.count("color"));
+    EXPECT_EQ(out["density"]->activeVoxelCount(), 32u * 32u * 32u); // 16³ field voxels, upsample 2
+    const RunResult info = run({"info", field});
+    ASSERT_EQ(info.code, 0) << info.describe();
+    EXPECT_EQ(info.err, "") << info.describe();
+}

@@ -132,6 +132,7 @@ void readPart(const Plan& plan, int rank, int ranks, const std::string& velName,
     if (unreadable(velName)) throw lic::InputError("grid " + detail::q(velName) + " in " + detail::q(path) + " cannot be read");
     openvdb::io::File file(path);
     try {
+        const detail::QuietNewerFormat quiet(check.fileVersion);
         file.open(/*delayLoad=*/true);
     } catch (const std::exception& e) {
         throw lic::InputError("cannot open " + detail::q(path) + " as a .vdb file: " + e.what());

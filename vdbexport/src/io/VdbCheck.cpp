@@ -15,6 +15,7 @@
 #include <blosc.h>
 #include <zlib.h>
 
+#include <algorithm>
 #include <array>
 #include <bit>
 #include <cmath>
@@ -40,6 +41,14 @@ lic::InputError refusal(const char* rule, const std::string& message)
 {
     return lic::InputError(std::string(kVdbCheckMarker) + rule + "] " + message);
 }
+
+/// The newest VDB file format version read. OpenVDB 13 writes 225 (OPENVDB_FILE_VERSION_HALF_GRID):
+/// the bump says a file may hold its new half-precision grid type (`Tree_half_5_4_3`); every
+/// other type is laid out as in 224 (OpenVDB 10 to 12: 13 changed only how old versions are
+/// read), and OpenVDB 10 reads a newer version number with a warning. So a 225 file of the
+/// types below is read by the OpenVDB licvdb is built with; a half grid is refused by name.
+constexpr uint32_t kNewestFileVersion = std::max<uint32_t>(225, openvdb::OPENVDB_FILE_VERSION);
+constexpr const char* kNewestFileWriter = openvdb::OPENVDB_FILE_VERSION > 225 ? "this build's OpenVDB" : "13.x";
 
 constexpr uint64_t kBloscOverhead = BLOSC_MAX_OVERHEAD; // 16-byte blosc header
 constexpr uint64_t kGuardBytes = 4096;                  // checked slack after each decoded block
@@ -293,15 +302,13 @@ void Checker::header(VdbCheckResult& r)
     r.fileVersion = mVersion;
     r.libraryMajor = get<uint32_t>("header");
     r.libraryMinor = get<uint32_t>("header");
-    if (mVersion < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION || mVersion > openvdb::OPENVDB_FILE_VERSION)
+    if (mVersion < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION || mVersion > kNewestFileVersion)
         throw refusal("version", quote(mPath) + " has VDB file format version " + std::to_string(mVersion)
                               + " (written by OpenVDB " + std::to_string(r.libraryMajor) + "."
                               + std::to_string(r.libraryMinor) + "); licvdb reads versions "
                               + std::to_string(openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION) + " to "
-                              + std::to_string(openvdb::OPENVDB_FILE_VERSION)
-                              + " (OpenVDB 2.0 to " + std::to_string(OPENVDB_LIBRARY_MAJOR_VERSION_NUMBER) + "."
-                              + std::to_string(OPENVDB_LIBRARY_MINOR_VERSION_NUMBER)
-                              + ", the version licvdb was built with): save it again with such a version, or it is corrupt");
+                              + std::to_string(kNewestFileVersion) + " (OpenVDB 2.0 to " + kNewestFileWriter
+                              + "): save it again with such a version, or it is corrupt");
 }
 
 void Checker::checkBools(const char* data, uint64_t n)
@@ -691,6 +698,10 @@ VdbCheckResult Checker::run()
         const int64_t blockPos = get<int64_t>("the grid offsets");
         const int64_t endPos = get<int64_t>("the grid offsets");
         if (!byUniqueName.emplace(uniqueName, r.grids.size()).second) throw corrupt("grid-name-twice", "the grid name appears twice");
+        if (g.gridType.starts_with("Tree_half_"))
+            throw refusal("half-grid", "grid " + quote(g.name) + " is a half-precision grid (" + g.gridType
+                                       + ", OpenVDB 13's HalfGrid), which licvdb does not read: save it as a float grid "
+                                       "(half-float storage, saveFloatAsHalf, is fine)");
         if (!openvdb::GridBase::isRegistered(g.gridType))
             throw corrupt("grid-type", "grid type " + quote(g.gridType) + " is not an OpenVDB grid type");
         const auto spec = specs.find(g.gridType);

@@ -9,6 +9,8 @@
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tree/LeafManager.h>
 
+#include <log4cplus/logger.h>
+
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
@@ -264,6 +266,7 @@ VdbReader::VdbReader(std::string path) : mPath(std::move(path))
     }
     mFile = std::make_unique<openvdb::io::File>(mPath);
     try {
+        const QuietNewerFormat quiet(mCheck.fileVersion);
         mFile->open(/*delayLoad=*/false);
     } catch (const std::exception& e) {
         const std::string msg = cleanMessage(e.what());
@@ -361,6 +364,33 @@ bool fileKey(const std::string& path, FileKey& key)
 }
 
 } // namespace
+
+namespace {
+std::mutex sQuietMutex;
+int sQuietScopes = 0;
+log4cplus::LogLevel sQuietSaved = log4cplus::NOT_SET_LOG_LEVEL;
+/// OpenVDB's logger (openvdb/util/logging.h getLogger(): its headers use it only where the
+/// program defines OPENVDB_USE_LOG4CPLUS, so licvdb names it itself).
+log4cplus::Logger openvdbLogger() { return log4cplus::Logger::getInstance(LOG4CPLUS_TEXT("openvdb")); }
+} // namespace
+
+QuietNewerFormat::QuietNewerFormat(uint32_t fileVersion) : mActive(fileVersion > openvdb::OPENVDB_FILE_VERSION)
+{
+    if (!mActive) return;
+    const std::lock_guard<std::mutex> lock(sQuietMutex);
+    if (sQuietScopes++ == 0) {
+        log4cplus::Logger logger = openvdbLogger();
+        sQuietSaved = logger.getLogLevel();
+        logger.setLogLevel(std::max(sQuietSaved, log4cplus::ERROR_LOG_LEVEL));
+    }
+}
+
+QuietNewerFormat::~QuietNewerFormat()
+{
+    if (!mActive) return;
+    const std::lock_guard<std::mutex> lock(sQuietMutex);
+    if (--sQuietScopes == 0) openvdbLogger().setLogLevel(sQuietSaved);
+}
 
 VdbCheckResult checkedVdb(const std::string& path)
 {

@@ -181,6 +181,22 @@ private:
     std::unique_ptr<openvdb::io::File> mFile;
 };
 
+/// OpenVDB before 13 writes a warning on stderr ("unsupported VDB file format") when it opens a
+/// file of a newer format version. checkVdbStructure has established that licvdb reads such a
+/// file (version 225: OpenVDB 13), so while one is opened OpenVDB logs errors only. The level is
+/// global: scopes on several threads keep it lowered until the last one ends.
+class QuietNewerFormat
+{
+public:
+    explicit QuietNewerFormat(uint32_t fileVersion);
+    ~QuietNewerFormat();
+    QuietNewerFormat(const QuietNewerFormat&) = delete;
+    QuietNewerFormat& operator=(const QuietNewerFormat&) = delete;
+
+private:
+    bool mActive;
+};
+
 /// @brief checkVdbStructure(path) then checkInIsolatedProcess(path), each done once per unchanged
 ///        file (same device, inode, size and modification time) in this process.
 /// @throw lic::InputError as those do.
