@@ -10,16 +10,17 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <optional>
 
 namespace lic {
 
 namespace {
 using FloatLeaf = openvdb::FloatTree::LeafNodeType;
 
-/// A scalar's value at `world` mapped from `range` onto [0, 1], clamped.
-double unitOf(const ScalarField& s, const openvdb::Vec3d& world, const std::array<double, 2>& range)
+/// A scalar's value mapped from `range` onto [0, 1], clamped.
+double unitOf(float v, const std::array<double, 2>& range)
 {
-    return std::clamp((double(s.at(world)) - range[0]) / (range[1] - range[0]), 0.0, 1.0);
+    return std::clamp((double(v) - range[0]) / (range[1] - range[0]), 0.0, 1.0);
 }
 
 /// Texture channel c of loop frame f (1-based) from a voxel's raw channels: composed from the
@@ -135,6 +136,9 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
     // roi ≤ 1; the 0.99 keeps float rounding of the blend from reaching the threshold, so a voxel
     // is ruled out only where keepSpotVoxel would drop it too.
     const int boundChannels = s.spots && s.composesOnArrival() ? frames * s.textureChannels() : 0;
+    std::optional<ScalarField::BlockSampler> widthAt, roiAt;
+    if (mInputs.width) widthAt.emplace(mInputs.width, mDomain).setBlock(origin);
+    if (mInputs.roi) roiAt.emplace(mInputs.roi, mDomain).setBlock(origin);
     for (auto on = mDomain.blockMask(b).beginOn(); on; ++on) {
         const openvdb::Index off = on.pos();
         auto raw = [&](int c) { return bc.block(i, c)[off]; };
@@ -146,11 +150,11 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
         const openvdb::Coord ijk = mDomain.coordOf(b * V + off);
         const openvdb::Vec3d world = mDomain.worldOf(ijk);
         float widthT = 0.0f;
-        if (mInputs.width) {
-            const double t = unitOf(mInputs.width, world, s.widthRange);
+        if (widthAt) {
+            const double t = unitOf(widthAt->at(off), s.widthRange);
             widthT = float(s.widthInvert ? 1.0 - t : t);
         }
-        const float roi = mInputs.roi ? roiWeight(mInputs.roi.at(world), s.roiRange[0], s.roiRange[1]) : 1.0f;
+        const float roi = roiAt ? roiWeight(roiAt->at(off), s.roiRange[0], s.roiRange[1]) : 1.0f;
         if (s.spots) {
             if (!keepSpotVoxel(raw, widthT, roi, b, origin, off)) continue;
         } else {
@@ -237,7 +241,7 @@ void Compositor::addStatic(std::size_t b, const openvdb::Coord& origin, openvdb:
         mVelocityLeaves.leaf(b, origin).setValueOn(off, openvdb::Vec3s(out));
     }
     if (mInputs.color) {
-        const double t = unitOf(mInputs.color, world, mSettings.colorRange);
+        const double t = unitOf(mInputs.color.at(world), mSettings.colorRange);
         mScalarLeaves.leaf(b, origin).setValueOn(off, float(t));
         mColorLeaves.leaf(b, origin).setValueOn(off, openvdb::Vec3s(mInputs.colormap->linear(t)));
     }

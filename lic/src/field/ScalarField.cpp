@@ -125,6 +125,42 @@ ScalarField::ScalarField(openvdb::FloatGrid::ConstPtr grid)
 
 namespace {
 
+/// Whether p·M (AffineMap::apply) gives each component from that axis alone, bit for bit: the
+/// linear part diagonal with positive entries. Then the off-diagonal terms are ±0 and the diagonal
+/// term of an integral (or non-negative-zero) input is never −0, so adding them changes nothing.
+bool axisAligned(const openvdb::Mat4d& m)
+{
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+            if (i == j ? !(m[i][j] > 0.0 && std::isfinite(m[i][j])) : m[i][j] != 0.0) return false;
+    return std::isfinite(m[3][0]) && std::isfinite(m[3][1]) && std::isfinite(m[3][2]);
+}
+
+} // namespace
+
+ScalarField::BlockSampler::BlockSampler(const ScalarField& scalar, const OutputDomain& domain)
+    : mScalar(scalar)
+    , mDomain(domain)
+    , mSeparable(axisAligned(domain.map().indexToWorld) && axisAligned(scalar.mWorldToIndex))
+{
+}
+
+void ScalarField::BlockSampler::setBlock(const openvdb::Coord& origin)
+{
+    mOrigin = origin;
+    if (!mSeparable) return;
+    const openvdb::Mat4d& out = mDomain.map().indexToWorld;
+    const openvdb::Mat4d& in = mScalar.mWorldToIndex;
+    for (int a = 0; a < 3; ++a)
+        for (int c = 0; c < OutputDomain::kBlockDim; ++c) {
+            // AffineMap::apply's component a without its zero terms (see axisAligned).
+            const double world = double(origin[a] + c) * out[a][a] + out[3][a];
+            mAxis[a][c] = mScalar.axis(a, world * in[a][a] + in[3][a]);
+        }
+}
+
+namespace {
+
 /// Order-preserving key of a float: larger floats get larger keys.
 std::uint32_t orderKey(float v)
 {
@@ -150,14 +186,15 @@ Histogram histogram(const ScalarField& scalar, const OutputDomain& domain, int t
         const ThreadLimit threadLimit(threads);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count), [&](const auto& r) {
             Histogram& h = parts.local();
+            ScalarField::BlockSampler at(scalar, domain);
             for (std::size_t i = r.begin(); i != r.end(); ++i) {
                 const std::size_t b = blocks ? (*blocks)[i] : i;
                 std::size_t voxel = first[i];
                 const auto& mask = domain.blockMask(b);
+                at.setBlock(domain.blockOrigin(b));
                 for (auto on = mask.beginOn(); on; ++on, ++voxel) {
                     if (!sample(voxel)) continue;
-                    const std::size_t off = on.pos();
-                    const float v = scalar.at(domain.worldOf(domain.coordOf(b * OutputDomain::kBlockVoxels + off)));
+                    const float v = at.at(on.pos());
                     if (std::isfinite(v)) add(orderKey(v), h, voxel);
                 }
             }

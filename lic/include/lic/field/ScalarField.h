@@ -63,6 +63,21 @@ void setPartOf(openvdb::GridBase& grid, const openvdb::CoordBBox& whole, const o
 /// part has values (a rank samples only inside its part; outside, the nearest part voxel).
 class ScalarField
 {
+    /// One axis of a lattice lookup: the two neighbours' offsets into the dense copy and the
+    /// weight of the second.
+    struct Axis
+    {
+        std::size_t o0 = 0, o1 = 0;
+        double f = 0;
+    };
+    Axis axis(int a, double idx) const
+    {
+        const double x = std::clamp(idx, mLo[a], mHi[a]) - mLo[a];
+        const double fl = std::floor(x);
+        const int i = std::clamp(int(fl) - mOff[a], 0, mDim[a] - 1); // mOff = 0 for a whole grid
+        return {std::size_t(i) * mStride[a], std::size_t(std::min(i + 1, mDim[a] - 1)) * mStride[a], x - fl};
+    }
+
 public:
     ScalarField() = default;
     /// @throw lic::InputError for a grid with no active voxels, or an active box (of a part: the
@@ -74,26 +89,50 @@ public:
     float at(const openvdb::Vec3d& world) const
     {
         const openvdb::Vec3d idx = AffineMap::apply(mWorldToIndex, world);
-        double f[3];
-        std::size_t o0[3], o1[3];
-        for (int a = 0; a < 3; ++a) {
-            const double x = std::clamp(idx[a], mLo[a], mHi[a]) - mLo[a];
-            const double fl = std::floor(x);
-            const int i = std::clamp(int(fl) - mOff[a], 0, mDim[a] - 1); // mOff = 0 for a whole grid
-            f[a] = x - fl;
-            o0[a] = std::size_t(i) * mStride[a];
-            o1[a] = std::size_t(std::min(i + 1, mDim[a] - 1)) * mStride[a];
-        }
-        const float* d = mData.data();
-        auto lerp = [](double u, double v, double t) { return u + (v - u) * t; };
-        const double c00 = lerp(d[o0[0] + o0[1] + o0[2]], d[o0[0] + o0[1] + o1[2]], f[2]);
-        const double c01 = lerp(d[o0[0] + o1[1] + o0[2]], d[o0[0] + o1[1] + o1[2]], f[2]);
-        const double c10 = lerp(d[o1[0] + o0[1] + o0[2]], d[o1[0] + o0[1] + o1[2]], f[2]);
-        const double c11 = lerp(d[o1[0] + o1[1] + o0[2]], d[o1[0] + o1[1] + o1[2]], f[2]);
-        return float(lerp(lerp(c00, c01, f[1]), lerp(c10, c11, f[1]), f[0]));
+        return lerp3(mData.data(), axis(0, idx[0]), axis(1, idx[1]), axis(2, idx[2]));
     }
 
+    /// at() at the voxel centres of one output block at a time (domain.worldOf of each voxel),
+    /// the same bits, cheaper. When the output domain's and the scalar's transforms are both
+    /// axis-aligned with positive scales (the usual case), a voxel centre's scalar index on each
+    /// axis depends on that axis's coordinate only: the zero off-diagonal terms add exact zeros,
+    /// so per-axis tables of the lattice offsets and weights give at()'s arithmetic without the
+    /// two matrix products and the clamps per voxel. Otherwise it calls at(). One per thread.
+    class BlockSampler
+    {
+    public:
+        BlockSampler(const ScalarField& scalar, const OutputDomain& domain);
+        /// Prepare the block whose first voxel is `origin`.
+        void setBlock(const openvdb::Coord& origin);
+        /// The scalar at the centre of the block's voxel `off` (x · 64 + y · 8 + z).
+        float at(openvdb::Index off) const
+        {
+            const int x = int(off >> 6), y = int((off >> 3) & 7u), z = int(off & 7u);
+            if (!mSeparable) return mScalar.at(mDomain.worldOf(mOrigin + openvdb::Coord(x, y, z)));
+            return lerp3(mScalar.mData.data(), mAxis[0][x], mAxis[1][y], mAxis[2][z]);
+        }
+        /// Whether the per-axis tables are in use (else every voxel calls ScalarField::at).
+        bool separable() const { return mSeparable; }
+
+    private:
+        const ScalarField& mScalar;
+        const OutputDomain& mDomain;
+        openvdb::Coord mOrigin;
+        bool mSeparable = false;
+        Axis mAxis[3][OutputDomain::kBlockDim];
+    };
+
 private:
+    static float lerp3(const float* d, const Axis& X, const Axis& Y, const Axis& Z)
+    {
+        auto lerp = [](double u, double v, double t) { return u + (v - u) * t; };
+        const double c00 = lerp(d[X.o0 + Y.o0 + Z.o0], d[X.o0 + Y.o0 + Z.o1], Z.f);
+        const double c01 = lerp(d[X.o0 + Y.o1 + Z.o0], d[X.o0 + Y.o1 + Z.o1], Z.f);
+        const double c10 = lerp(d[X.o1 + Y.o0 + Z.o0], d[X.o1 + Y.o0 + Z.o1], Z.f);
+        const double c11 = lerp(d[X.o1 + Y.o1 + Z.o0], d[X.o1 + Y.o1 + Z.o1], Z.f);
+        return float(lerp(lerp(c00, c01, Y.f), lerp(c10, c11, Y.f), X.f));
+    }
+
     openvdb::FloatGrid::ConstPtr mGrid;
     openvdb::Mat4d mWorldToIndex;
     double mLo[3] = {}, mHi[3] = {}; ///< the (whole) active box, clamped to
