@@ -684,11 +684,16 @@ std::uint64_t SplatRun::depositSpot(const SpotLine& L, float weight, SplatScratc
             for (int i = i0; i <= i1; ++i) inside += win.weight(i);
         }
         startBlock(li, sc);
-        std::fill(sc.parts.begin(), sc.parts.end(), 0.0f);
-        if (nearWall) mTables.addDirect(tau, d, weight, i0, i1, inside, sc.parts.data());
-        else mTables.add(tau, d, float(double(weight) * mWinTotal / inside), sc.parts.data());
         float* acc = &sc.acc[li * K];
-        for (int p = 0; p < mTables.parts(); ++p) acc[p] += sc.parts[std::size_t(p)];
+        if (nearWall) {
+            // The window's samples summed first, then added to the voxel (one rounding per spot).
+            std::fill(sc.parts.begin(), sc.parts.end(), 0.0f);
+            mTables.addDirect(tau, d, weight, i0, i1, inside, sc.parts.data());
+            for (int p = 0; p < mTables.parts(); ++p) acc[p] += sc.parts[std::size_t(p)];
+        } else {
+            // One term per part: added in place (the same bits as through a zeroed buffer).
+            mTables.add(tau, d, float(double(weight) * mWinTotal / inside), acc);
+        }
         if (mSettings.ripple && float(d) < sc.nearest[li]) {
             // The window's own ripple normalisation (Σ e^{iθi} / N over the samples inside), from
             // the nearest spot line: 0 for a whole window.

@@ -123,7 +123,7 @@ public:
     };
 
 private:
-    static float lerp3(const float* d, const Axis& X, const Axis& Y, const Axis& Z)
+    [[gnu::always_inline]] static float lerp3(const float* d, const Axis& X, const Axis& Y, const Axis& Z)
     {
         auto lerp = [](double u, double v, double t) { return u + (v - u) * t; };
         const double c00 = lerp(d[X.o0 + Y.o0 + Z.o0], d[X.o0 + Y.o0 + Z.o1], Z.f);
