@@ -147,8 +147,6 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
             for (int c = 1; c < boundChannels; ++c) top = std::max(top, raw(c));
             if (top * mMaxInvPeak <= 0.99f * kSparseEpsilon) continue;
         }
-        const openvdb::Coord ijk = mDomain.coordOf(b * V + off);
-        const openvdb::Vec3d world = mDomain.worldOf(ijk);
         float widthT = 0.0f;
         if (widthAt) {
             const double t = unitOf(widthAt->at(off), s.widthRange);
@@ -166,7 +164,7 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
             if (mWidthLeaves.enabled()) mWidthLeaves.leaf(b, origin).setValueOn(off, widthT);
             if (mRoiLeaves.enabled()) mRoiLeaves.leaf(b, origin).setValueOn(off, roi);
         }
-        addStatic(b, origin, off, ijk, world, noise);
+        addStatic(b, origin, off, mDomain.coordOf(b * V + off), noise);
     }
 }
 
@@ -201,8 +199,10 @@ bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::siz
 }
 
 void Compositor::addStatic(std::size_t b, const openvdb::Coord& origin, openvdb::Index off, const openvdb::Coord& ijk,
-                           const openvdb::Vec3d& world, const NoiseTexture* noise)
+                           const NoiseTexture* noise)
 {
+    const bool needWorld = mTangentLeaves.enabled() || mVelocityLeaves.enabled() || bool(mInputs.color);
+    const openvdb::Vec3d world = needWorld ? mDomain.worldOf(ijk) : openvdb::Vec3d(0.0);
     if (mInputLeaves.enabled()) {
         float v = 0.0f;
         if (noise) {

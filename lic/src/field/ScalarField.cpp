@@ -145,6 +145,12 @@ ScalarField::BlockSampler::BlockSampler(const ScalarField& scalar, const OutputD
 {
 }
 
+float ScalarField::BlockSampler::general(openvdb::Index off) const
+{
+    const openvdb::Coord ijk = mOrigin + openvdb::Coord(int(off >> 6), int((off >> 3) & 7u), int(off & 7u));
+    return mScalar.at(mDomain.worldOf(ijk));
+}
+
 void ScalarField::BlockSampler::setBlock(const openvdb::Coord& origin)
 {
     mOrigin = origin;

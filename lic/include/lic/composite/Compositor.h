@@ -130,7 +130,7 @@ private:
                        openvdb::Index off);
     /// The grids every frame shares (input, tangent, colour, scalar) at one voxel.
     void addStatic(std::size_t b, const openvdb::Coord& origin, openvdb::Index off, const openvdb::Coord& ijk,
-                   const openvdb::Vec3d& world, const NoiseTexture* noise);
+                   const NoiseTexture* noise);
     /// A loop frame's (or a noise still's) density and halo leaves, composed from the kept channels.
     void composeLeaves(int f, LeafSet<openvdb::FloatGrid>& density, LeafSet<openvdb::FloatGrid>& halo,
                        std::vector<LeafSet<openvdb::FloatGrid>>& lines, std::vector<LeafSet<openvdb::FloatGrid>>& halos);

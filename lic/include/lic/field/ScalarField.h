@@ -105,16 +105,17 @@ public:
         /// Prepare the block whose first voxel is `origin`.
         void setBlock(const openvdb::Coord& origin);
         /// The scalar at the centre of the block's voxel `off` (x · 64 + y · 8 + z).
-        float at(openvdb::Index off) const
+        [[gnu::always_inline]] float at(openvdb::Index off) const
         {
-            const int x = int(off >> 6), y = int((off >> 3) & 7u), z = int(off & 7u);
-            if (!mSeparable) return mScalar.at(mDomain.worldOf(mOrigin + openvdb::Coord(x, y, z)));
-            return lerp3(mScalar.mData.data(), mAxis[0][x], mAxis[1][y], mAxis[2][z]);
+            if (!mSeparable) [[unlikely]]
+                return general(off);
+            return lerp3(mScalar.mData.data(), mAxis[0][off >> 6], mAxis[1][(off >> 3) & 7u], mAxis[2][off & 7u]);
         }
         /// Whether the per-axis tables are in use (else every voxel calls ScalarField::at).
         bool separable() const { return mSeparable; }
 
     private:
+        float general(openvdb::Index off) const; ///< ScalarField::at at the voxel's centre
         const ScalarField& mScalar;
         const OutputDomain& mDomain;
         openvdb::Coord mOrigin;
