@@ -16,12 +16,15 @@
 #include <lic/util/Error.h>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <map>
+
+#include <thread>
 
 #include <unistd.h>
 
@@ -336,6 +339,46 @@ TEST_F(VdbCheckTest, IsolatedChildOutcomes)
     // Off: nothing is run.
     vdbexport::setReadIsolation("");
     EXPECT_NO_THROW(vdbexport::checkInIsolatedProcess(file));
+}
+
+// checkedVdb starts the child before its own layer 1 and lets the two run side by side. A check
+// dropped unfinished stops its child (killed and reaped, no zombie left); a file refused by layer 1
+// here gets layer 1's message at once, not the child's (which here would hang for a minute).
+TEST_F(VdbCheckTest, TheChildRunsBesideLayerOneAndIsStoppedWhenLayerOneRefuses)
+{
+    const IsolationGuard guard;
+    const auto samples = vdb_samples::writeVdbSamples(mDir, 8);
+    const fs::path pidFile = mDir / "child.pid";
+    vdbexport::setReadIsolation(script(mDir, "hang.sh", "echo $$ > '" + pidFile.string() + "'\nexec sleep 60"));
+    ::setenv("LICVDB_READ_TIMEOUT", "60", 1);
+
+    pid_t child = -1;
+    {
+        vdbexport::IsolatedCheck check = vdbexport::startIsolatedCheck(samples[0]);
+        for (int i = 0; i < 3000 && !fs::exists(pidFile); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        ASSERT_TRUE(fs::exists(pidFile)) << "the child did not start";
+        std::this_thread::sleep_for(std::chrono::milliseconds(50)); // its pid written in full
+        child = pid_t(std::stol(readFile(pidFile.string())));
+        ASSERT_GT(child, 0);
+        EXPECT_EQ(::kill(child, 0), 0) << "the child runs while the check is held";
+    } // dropped unfinished
+    errno = 0;
+    EXPECT_EQ(::kill(child, 0), -1);
+    EXPECT_EQ(errno, ESRCH) << "the dropped check's child is still there (not killed or not reaped)";
+
+    std::string bytes = readFile(samples[0]);
+    const std::size_t at = vdb_mutants::findBloscHeader(bytes, 6144);
+    ASSERT_NE(at, std::string::npos);
+    const uint32_t lie = 8182;
+    std::memcpy(&bytes[at + 4], &lie, 4);
+    const std::string path = (mDir / "lying-beside.vdb").string();
+    writeFile(path, bytes);
+    vdbexport::detail::clearCheckedVdbCache();
+    const std::string layerOne = inputErrorOf([&] { vdbexport::checkVdbStructure(path); });
+    const auto t0 = std::chrono::steady_clock::now();
+    EXPECT_EQ(inputErrorOf([&] { vdbexport::detail::checkedVdb(path); }), layerOne);
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 30.0)
+        << "waited for the hanging child although layer 1 had refused the file";
 }
 
 TEST(Sha256, KnownDigests)

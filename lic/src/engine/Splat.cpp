@@ -229,10 +229,16 @@ void CometTables::addPhase(double tau, double d, float a, int g, float* out) con
 
 namespace {
 
+/// Column-major 3×3 in output index units: G_j maps an offset from the line at sample j back to
+/// the offset it came from at the spot (the inverse of the flow map's Jacobian along the line).
+using Xform = std::array<float, 9>;
+
 /// One spot's streamline, output-index positions every h.
 struct SpotLine
 {
-    std::size_t first = 0;   // into the shared point array
+    const openvdb::Vec3f* points = nullptr;   // the samples (SplatRun's per-line storage)
+    const openvdb::Vec3f* tangents = nullptr; // unit direction at each sample
+    const Xform* xforms = nullptr;            // the transport back to the spot at each sample
     int count = 0;           // samples
     int centre = 0;          // index of the spot itself among them
     double endBack = -1e300; // arc of a natural end upstream (a wall or critical point), else −∞
@@ -241,10 +247,6 @@ struct SpotLine
     openvdb::Vec3f tangent;  // unit flow direction at the spot (output index space)
     int phase = 0;           // comet loops: the spot's phase (cometPhase)
 };
-
-/// Column-major 3×3 in output index units: G_j maps an offset from the line at sample j back to
-/// the offset it came from at the spot (the inverse of the flow map's Jacobian along the line).
-using Xform = std::array<float, 9>;
 
 /// Transports of offsets along one spot line: M(s) solves dM/ds = J_u M, M(0) = I, where J_u is
 /// the Jacobian of the unit flow direction (world units; arc s in world units), so an offset δ at
@@ -395,8 +397,14 @@ private:
     TraceSettings mTrace; // along a spot's line: over the kernel's support each way
     int mStride = 1;
     std::vector<SpotLine> mLines;
-    std::vector<openvdb::Vec3f> mPoints, mTangents; // every line's samples, packed
-    std::vector<Xform> mXforms;
+    /// Every line's samples, unit directions and transports, one allocation per line (as traced:
+    /// no serial packing pass).
+    struct LineSamples
+    {
+        std::vector<openvdb::Vec3f> points, tangents;
+        std::vector<Xform> xforms;
+    };
+    std::vector<LineSamples> mSamples;
 };
 
 std::uint64_t SplatRun::traceLines()
@@ -405,30 +413,31 @@ std::uint64_t SplatRun::traceLines()
     mTrace = detail::traceSettings(mField, mDomain, mSettings);
     mTrace.maxSamples = int(std::ceil((std::max(-mTauMin, mTauMax) + 1.0) / mH));
     mStride = detail::integrationStride(mDomain, mSettings);
-    std::vector<std::vector<openvdb::Vec3f>> linePts(n);
-    std::vector<std::vector<Xform>> lineXf(n);
+    mSamples.assign(n, LineSamples{});
     mLines.assign(n, SpotLine{});
     tbb::enumerable_thread_specific<std::pair<std::vector<openvdb::Vec3f>, std::vector<openvdb::Vec3d>>> tls;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
         auto& [back, scratch] = tls.local();
-        for (std::size_t s = r.begin(); s != r.end(); ++s) traceLine(s, back, scratch, linePts[s], lineXf[s]);
+        for (std::size_t s = r.begin(); s != r.end(); ++s) {
+            LineSamples& ls = mSamples[s];
+            traceLine(s, back, scratch, ls.points, ls.xforms);
+            // Unit direction at every sample (central differences; one-sided at the ends).
+            const std::vector<openvdb::Vec3f>& p = ls.points;
+            ls.tangents.resize(p.size());
+            for (int j = 0; j < int(p.size()); ++j) {
+                openvdb::Vec3f t = p[std::size_t(std::min(int(p.size()) - 1, j + 1))] - p[std::size_t(std::max(0, j - 1))];
+                const float tl = t.length();
+                ls.tangents[std::size_t(j)] = tl > 0 ? t / tl : openvdb::Vec3f(0.0f);
+            }
+            mLines[s].points = ls.points.data();
+            mLines[s].tangents = ls.tangents.data();
+            mLines[s].xforms = ls.xforms.data();
+        }
     });
     std::uint64_t samples = 0;
     for (std::size_t s = 0; s < n; ++s) {
-        mLines[s].first = mPoints.size();
-        mPoints.insert(mPoints.end(), linePts[s].begin(), linePts[s].end());
-        mXforms.insert(mXforms.end(), lineXf[s].begin(), lineXf[s].end());
-        // Unit direction at every sample (central differences; one-sided at the ends).
-        const std::vector<openvdb::Vec3f>& p = linePts[s];
-        for (int j = 0; j < int(p.size()); ++j) {
-            openvdb::Vec3f t = p[std::size_t(std::min(int(p.size()) - 1, j + 1))] - p[std::size_t(std::max(0, j - 1))];
-            const float tl = t.length();
-            mTangents.push_back(tl > 0 ? t / tl : openvdb::Vec3f(0.0f));
-        }
         samples += std::uint64_t(mLines[s].count);
         if (mComets) mLines[s].phase = cometPhase(mSpots.centers[s], mComets->frames());
-        std::vector<openvdb::Vec3f>().swap(linePts[s]);
-        std::vector<Xform>().swap(lineXf[s]);
     }
     return samples;
 }
@@ -534,8 +543,8 @@ void SplatRun::nearestPoints(const SpotLine& L, const Brick& brick, SplatScratch
     // direction at j picks the sample jf, then the distance to the line through P_jf along its
     // direction (samples are h apart, so this is the segment distance to within h²/8). All in
     // float: positions are output index units.
-    const openvdb::Vec3f* P = &mPoints[L.first];
-    const openvdb::Vec3f* T = &mTangents[L.first];
+    const openvdb::Vec3f* P = L.points;
+    const openvdb::Vec3f* T = L.tangents;
     const BrickIndex& bi = sc.index;
     const std::uint32_t gen = sc.generation;
     const openvdb::Coord bmin = brick.box.min(), bmax = brick.box.max();
@@ -650,7 +659,7 @@ std::uint64_t SplatRun::depositSpot(const SpotLine& L, float weight, SplatScratc
     // A spot within reach of where its line ends: part of it lies beyond the wall, where no window
     // sample can see it; sum its windows directly instead of from the tables.
     const bool nearWall = L.endFwd < reach + h || L.endBack > -(reach + h);
-    const Xform* G = &mXforms[L.first];
+    const Xform* G = L.xforms;
     const openvdb::Vec3d t0(L.tangent);
     std::uint64_t deposits = 0;
     for (std::int64_t l : sc.touched) {

@@ -136,15 +136,19 @@ void VelocityField::init(const FieldExtent* whole)
     mLo = mBBox.min().asVec3d() - openvdb::Vec3d(0.5);
     mHi = mBBox.max().asVec3d() + openvdb::Vec3d(0.5);
     {
-        openvdb::tools::Dense<openvdb::Vec3s, openvdb::tools::LayoutZYX> dense(mDenseBox, openvdb::Vec3s(0.0f));
+        // copyToDense writes every voxel of the box (values, tiles, background), in parallel, so
+        // neither array is filled first (a serial fill would also fault every page on one core).
+        const std::size_t n = std::size_t(dim[0]) * std::size_t(dim[1]) * std::size_t(dim[2]);
+        const std::unique_ptr<openvdb::Vec3s[]> staging(new openvdb::Vec3s[n]);
+        openvdb::tools::Dense<openvdb::Vec3s, openvdb::tools::LayoutZYX> dense(mDenseBox, staging.get());
         openvdb::tools::copyToDense(*mGrid, dense);
-        mDense.resize(dense.valueCount());
+        mDense.reset(new Float4[n]);
         const openvdb::Vec3s* src = dense.data();
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mDense.size()), [&](const auto& r) {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const auto& r) {
             for (std::size_t i = r.begin(); i != r.end(); ++i) mDense[i] = Float4{src[i][0], src[i][1], src[i][2], 0.0f};
         });
     }
-    mData = mDense.data();
+    mData = mDense.get();
 }
 
 openvdb::BBoxd VelocityField::worldBBox() const

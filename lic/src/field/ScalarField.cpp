@@ -12,6 +12,7 @@
 
 #include <bit>
 #include <cmath>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -118,9 +119,10 @@ ScalarField::ScalarField(openvdb::FloatGrid::ConstPtr grid)
     mStride[0] = std::size_t(dim[1]) * std::size_t(dim[2]);
     mStride[1] = std::size_t(dim[2]);
     mStride[2] = 1;
-    openvdb::tools::Dense<float, openvdb::tools::LayoutZYX> dense(held, 0.0f);
+    // Straight into the held array (copyToDense writes every voxel of the box).
+    mData.resize(std::size_t(dim[0]) * std::size_t(dim[1]) * std::size_t(dim[2]));
+    openvdb::tools::Dense<float, openvdb::tools::LayoutZYX> dense(held, mData.data());
     openvdb::tools::copyToDense(*mGrid, dense);
-    mData.assign(dense.data(), dense.data() + dense.valueCount());
 }
 
 namespace {
@@ -245,8 +247,13 @@ std::array<double, 2> autoRange(const ScalarField& scalar, const OutputDomain& d
     for (std::size_t i = 0; i < count; ++i)
         first[i + 1] = first[i] + domain.blockMask(blocks ? (*blocks)[i] : i).countOn();
     const bool keep = first[count] <= kKeepLimit;
-    std::vector<std::uint16_t> high(keep ? first[count] : 0);
-    auto all = [](std::size_t) { return true; };
+    // Not zero-filled up front (a serial pass over 2 bytes a voxel): the first pass writes every
+    // voxel's entry, in parallel (0 where the value is not finite; the second pass skips those again).
+    const std::unique_ptr<std::uint16_t[]> high(keep ? new std::uint16_t[first[count]] : nullptr);
+    auto all = [&](std::size_t voxel) {
+        if (keep) high[voxel] = 0;
+        return true;
+    };
     const Histogram coarse = histogram(scalar, domain, threads, kBins, blocks, first, reduce, all,
                                        [&](std::uint32_t key, Histogram& h, std::size_t voxel) {
                                            ++h[key >> 16];

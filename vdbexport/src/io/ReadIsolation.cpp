@@ -16,6 +16,7 @@
 #include <string>
 #include <sys/stat.h>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <fcntl.h>
@@ -79,40 +80,56 @@ double readTimeoutSeconds(uint64_t fileBytes)
     return 20.0 + double(fileBytes) / 10e6;
 }
 
-namespace {
-void runIsolated(const std::string& exe, const std::string& path, const std::vector<std::string>& args,
-                 const std::string& reader, const std::string& expected);
-} // namespace
-
-void checkInIsolatedProcess(const std::string& path)
+IsolatedCheck::IsolatedCheck(IsolatedCheck&& o) noexcept
+    : mPid(std::exchange(o.mPid, -1))
+    , mErrFd(std::exchange(o.mErrFd, -1))
+    , mPath(std::move(o.mPath))
+    , mReader(std::move(o.mReader))
+    , mExpected(std::move(o.mExpected))
+    , mLimit(o.mLimit)
+    , mT0(o.mT0)
 {
-    std::string exe, helper;
-    {
-        const std::lock_guard<std::mutex> lock(sExeMutex);
-        exe = sExecutable;
-        helper = sVdbHelper;
+}
+
+IsolatedCheck& IsolatedCheck::operator=(IsolatedCheck&& o) noexcept
+{
+    if (this != &o) {
+        stop();
+        mPid = std::exchange(o.mPid, -1);
+        mErrFd = std::exchange(o.mErrFd, -1);
+        mPath = std::move(o.mPath);
+        mReader = std::move(o.mReader);
+        mExpected = std::move(o.mExpected);
+        mLimit = o.mLimit;
+        mT0 = o.mT0;
     }
-    if (exe.empty()) return;
-    if (!helper.empty()) runIsolated(helper, path, {"--", path}, "OpenVDB's reader", "an intact OpenVDB .vdb file");
-    else runIsolated(exe, path, {"info", "--check", "--quiet", "--", path}, "OpenVDB's reader", "an intact OpenVDB .vdb file");
+    return *this;
 }
 
-void checkReadInIsolatedProcess(const std::string& path, const std::vector<std::string>& args, const std::string& reader,
-                                const std::string& expected)
+IsolatedCheck::~IsolatedCheck() { stop(); }
+
+void IsolatedCheck::stop() noexcept
 {
-    const std::string exe = readIsolationExecutable();
-    if (exe.empty()) return;
-    runIsolated(exe, path, args, reader, expected);
+    if (mErrFd >= 0) ::close(mErrFd);
+    mErrFd = -1;
+    if (mPid > 0) {
+        int status = 0;
+        ::kill(mPid, SIGKILL);
+        while (::waitpid(mPid, &status, 0) < 0 && errno == EINTR) {}
+    }
+    mPid = -1;
 }
 
-namespace {
-
-void runIsolated(const std::string& exe, const std::string& path, const std::vector<std::string>& args,
-                 const std::string& reader, const std::string& expected)
+IsolatedCheck IsolatedCheck::start(const std::string& exe, const std::string& path, const std::vector<std::string>& args,
+                                   const std::string& reader, const std::string& expected)
 {
+    IsolatedCheck c;
+    c.mPath = path;
+    c.mReader = reader;
+    c.mExpected = expected;
     struct stat st{};
     const uint64_t bytes = ::stat(path.c_str(), &st) == 0 ? uint64_t(st.st_size) : 0;
-    const double limit = readTimeoutSeconds(bytes);
+    c.mLimit = readTimeoutSeconds(bytes);
 
     int errPipe[2];
     if (::pipe2(errPipe, O_CLOEXEC) != 0)
@@ -144,10 +161,20 @@ void runIsolated(const std::string& exe, const std::string& path, const std::vec
         throw lic::Error("cannot check " + quote(path) + " in a child process: starting " + quote(exe) + " failed ("
                          + std::strerror(rc) + ")");
     }
+    c.mPid = pid;
+    c.mErrFd = errPipe[0];
+    c.mT0 = std::chrono::steady_clock::now();
+    return c;
+}
 
+void IsolatedCheck::finish()
+{
+    if (mPid <= 0) return;
+    const std::string& path = mPath;
+    const double limit = mLimit;
+    const auto t0 = mT0;
     // Collect stderr until the child closes it or the time is up.
     std::string err;
-    const auto t0 = std::chrono::steady_clock::now();
     bool timedOut = false;
     for (;;) {
         const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -155,44 +182,47 @@ void runIsolated(const std::string& exe, const std::string& path, const std::vec
             timedOut = true;
             break;
         }
-        pollfd pfd{errPipe[0], POLLIN, 0};
+        pollfd pfd{mErrFd, POLLIN, 0};
         const int wait = int(std::min(250.0, (limit - elapsed) * 1000.0)) + 1;
         const int p = ::poll(&pfd, 1, wait);
         if (p < 0 && errno == EINTR) continue;
         if (p <= 0) continue;
         char buf[4096];
-        const ssize_t n = ::read(errPipe[0], buf, sizeof(buf));
+        const ssize_t n = ::read(mErrFd, buf, sizeof(buf));
         if (n < 0 && errno == EINTR) continue;
         if (n <= 0) break; // EOF: the child has exited (or closed stderr)
         if (err.size() < 65536) err.append(buf, size_t(n));
     }
-    ::close(errPipe[0]);
-    int status = 0;
+    ::close(mErrFd);
+    mErrFd = -1;
     if (timedOut) {
-        ::kill(pid, SIGKILL);
-        while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
+        stop();
         throw lic::InputError("reading " + quote(path) + " did not finish within " + std::to_string(int(limit))
-                              + " s (in a child process, which was stopped); refused as corrupt; expected " + expected
+                              + " s (in a child process, which was stopped); refused as corrupt; expected " + mExpected
                               + " (set LICVDB_READ_TIMEOUT=SECONDS for a very large file on a slow disk)");
     }
     // stderr is closed; give the child the rest of the time to exit.
+    int status = 0;
     for (;;) {
-        const pid_t w = ::waitpid(pid, &status, WNOHANG);
-        if (w == pid) break;
-        if (w < 0 && errno != EINTR) throw lic::Error("cannot check " + quote(path) + ": waiting for the child failed");
+        const pid_t w = ::waitpid(mPid, &status, WNOHANG);
+        if (w == mPid) break;
+        if (w < 0 && errno != EINTR) {
+            mPid = -1;
+            throw lic::Error("cannot check " + quote(path) + ": waiting for the child failed");
+        }
         const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         if (elapsed >= limit) {
-            ::kill(pid, SIGKILL);
-            while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
+            stop();
             throw lic::InputError("reading " + quote(path) + " did not finish within " + std::to_string(int(limit))
                                   + " s (in a child process, which was stopped); refused as corrupt");
         }
         std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }
+    mPid = -1; // reaped
     if (WIFSIGNALED(status)) {
         const int sig = WTERMSIG(status);
-        throw lic::InputError("reading " + quote(path) + " crashed " + reader + " in a child process (signal "
-                              + std::to_string(sig) + ": " + strsignal(sig) + "); the file is corrupt; expected " + expected);
+        throw lic::InputError("reading " + quote(path) + " crashed " + mReader + " in a child process (signal "
+                              + std::to_string(sig) + ": " + strsignal(sig) + "); the file is corrupt; expected " + mExpected);
     }
     const int code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
     if (code == 0) return;
@@ -201,6 +231,29 @@ void runIsolated(const std::string& exe, const std::string& path, const std::vec
                      + "): " + childReason(err));
 }
 
-} // namespace
+IsolatedCheck startIsolatedCheck(const std::string& path)
+{
+    std::string exe, helper;
+    {
+        const std::lock_guard<std::mutex> lock(sExeMutex);
+        exe = sExecutable;
+        helper = sVdbHelper;
+    }
+    if (exe.empty()) return {};
+    if (!helper.empty())
+        return IsolatedCheck::start(helper, path, {"--", path}, "OpenVDB's reader", "an intact OpenVDB .vdb file");
+    return IsolatedCheck::start(exe, path, {"info", "--check", "--quiet", "--", path}, "OpenVDB's reader",
+                                "an intact OpenVDB .vdb file");
+}
+
+void checkInIsolatedProcess(const std::string& path) { startIsolatedCheck(path).finish(); }
+
+void checkReadInIsolatedProcess(const std::string& path, const std::vector<std::string>& args, const std::string& reader,
+                                const std::string& expected)
+{
+    const std::string exe = readIsolationExecutable();
+    if (exe.empty()) return;
+    IsolatedCheck::start(exe, path, args, reader, expected).finish();
+}
 
 } // namespace vdbexport

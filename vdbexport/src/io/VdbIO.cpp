@@ -400,8 +400,11 @@ VdbCheckResult checkedVdb(const std::string& path)
         const std::lock_guard<std::mutex> lock(sCheckedMutex);
         if (const auto it = sChecked.find(before); it != sChecked.end()) return it->second;
     }
+    // The child (which runs layer 1 itself before reading) works beside this process's layer 1;
+    // if layer 1 refuses the file here, the child is stopped and that message is the one given.
+    IsolatedCheck child = startIsolatedCheck(path);
     VdbCheckResult result = checkVdbStructure(path);
-    checkInIsolatedProcess(path);
+    child.finish();
     FileKey after{};
     if (known && fileKey(path, after) && !(before < after) && !(after < before)) {
         const std::lock_guard<std::mutex> lock(sCheckedMutex);

@@ -2,10 +2,13 @@
 // defences; see docs/inputs.md), and reading it once in a disposable child process (layer 2).
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <string>
 #include <string_view>
 #include <vector>
+
+#include <sys/types.h>
 
 namespace vdbexport {
 
@@ -93,6 +96,39 @@ uint64_t readMemoryLimitBytes();
 ///        signal (the file crashed the reader) or runs out of time; lic::Error if the child cannot
 ///        be started or fails for another reason.
 void checkInIsolatedProcess(const std::string& path);
+
+/// @brief A child check started but not yet waited for, so that the caller can do other work
+///        meanwhile (checkedVdb runs layer 1 beside it). finish() waits for its verdict and throws
+///        as checkInIsolatedProcess; a check dropped unfinished is stopped (the child killed and
+///        reaped). An empty check (isolation off) finishes at once.
+class IsolatedCheck
+{
+public:
+    IsolatedCheck() = default;
+    IsolatedCheck(IsolatedCheck&& other) noexcept;
+    IsolatedCheck& operator=(IsolatedCheck&& other) noexcept;
+    IsolatedCheck(const IsolatedCheck&) = delete;
+    IsolatedCheck& operator=(const IsolatedCheck&) = delete;
+    ~IsolatedCheck();
+
+    /// Start `exe args...` as the child reading `path` (LICVDB_READ_CHILD=1, stderr collected).
+    /// @throw lic::Error if it cannot be started.
+    static IsolatedCheck start(const std::string& exe, const std::string& path, const std::vector<std::string>& args,
+                               const std::string& reader, const std::string& expected);
+    void finish();
+
+private:
+    void stop() noexcept;
+
+    pid_t mPid = -1;
+    int mErrFd = -1;
+    std::string mPath, mReader, mExpected;
+    double mLimit = 0;
+    std::chrono::steady_clock::time_point mT0{};
+};
+
+/// The check checkInIsolatedProcess(path) runs, started (an empty one while isolation is off).
+IsolatedCheck startIsolatedCheck(const std::string& path);
 
 /// @brief The same for any reader: run the set executable with `args` (e.g. `convert PATH --list`
 ///        for a mesh, read by VTK) in a child process with LICVDB_READ_CHILD=1. `reader` names the
