@@ -58,6 +58,20 @@ using vdb_mutants::writeFile;
 #define EXPECT_CONTAINS(haystack, needle) \
     EXPECT_NE(std::string(haystack).find(needle), std::string::npos) << "expected \"" << (needle) << "\" in: " << (haystack)
 
+/// `sample` with its first full vec3s leaf's blosc header claiming 8182 bytes where the leaf holds
+/// 512 × 12 = 6144, written to dir/name; "" if the sample has no such block.
+std::string writeLyingLeaf(const std::string& sample, const fs::path& dir, const std::string& name)
+{
+    std::string bytes = readFile(sample);
+    const std::size_t at = vdb_mutants::findBloscHeader(bytes, 6144);
+    if (at == std::string::npos) return "";
+    const uint32_t lie = 8182;
+    std::memcpy(&bytes[at + 4], &lie, 4);
+    const std::string path = (dir / name).string();
+    writeFile(path, bytes);
+    return path;
+}
+
 
 } // namespace
 
@@ -99,13 +113,8 @@ TEST_F(VdbCheckTest, AcceptsEveryKindOfRealFile)
 TEST_F(VdbCheckTest, LyingBloscSizeInAVec3LeafIsRefusedBeforeOpenVdbReadsIt)
 {
     const auto samples = vdb_samples::writeVdbSamples(mDir);
-    std::string bytes = readFile(samples[0]);
-    const std::size_t at = vdb_mutants::findBloscHeader(bytes, 6144);
-    ASSERT_NE(at, std::string::npos) << "no full vec3s leaf block in the sample";
-    const uint32_t lie = 8182;
-    std::memcpy(&bytes[at + 4], &lie, 4);
-    const std::string path = (mDir / "lying.vdb").string();
-    writeFile(path, bytes);
+    const std::string path = writeLyingLeaf(samples[0], mDir, "lying.vdb");
+    ASSERT_FALSE(path.empty()) << "no full vec3s leaf block in the sample";
     const std::string msg = inputErrorOf([&] { vdbexport::checkVdbStructure(path); });
     EXPECT_CONTAINS(msg, "lying.vdb");
     EXPECT_CONTAINS(msg, "is corrupt");
@@ -118,6 +127,7 @@ TEST_F(VdbCheckTest, LyingBloscSizeInAVec3LeafIsRefusedBeforeOpenVdbReadsIt)
     EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::describeVdb(path); }), "8182");
     // The block's stored length word made huge is refused by name too.
     std::string bytes2 = readFile(samples[0]);
+    const std::size_t at = vdb_mutants::findBloscHeader(bytes2, 6144);
     const int64_t huge = int64_t(1) << 40;
     std::memcpy(&bytes2[at - 8], &huge, 8);
     writeFile(path, bytes2);
@@ -366,13 +376,8 @@ TEST_F(VdbCheckTest, TheChildRunsBesideLayerOneAndIsStoppedWhenLayerOneRefuses)
     EXPECT_EQ(::kill(child, 0), -1);
     EXPECT_EQ(errno, ESRCH) << "the dropped check's child is still there (not killed or not reaped)";
 
-    std::string bytes = readFile(samples[0]);
-    const std::size_t at = vdb_mutants::findBloscHeader(bytes, 6144);
-    ASSERT_NE(at, std::string::npos);
-    const uint32_t lie = 8182;
-    std::memcpy(&bytes[at + 4], &lie, 4);
-    const std::string path = (mDir / "lying-beside.vdb").string();
-    writeFile(path, bytes);
+    const std::string path = writeLyingLeaf(samples[0], mDir, "lying-beside.vdb");
+    ASSERT_FALSE(path.empty()) << "no full vec3s leaf block in the sample";
     vdbexport::detail::clearCheckedVdbCache();
     const std::string layerOne = inputErrorOf([&] { vdbexport::checkVdbStructure(path); });
     const auto t0 = std::chrono::steady_clock::now();
@@ -460,13 +465,8 @@ TEST_F(VdbCheckTest, TheLayoutCheckOfAWrittenFileRefusesEveryCutAsTheFullCheckDo
     }
     EXPECT_GE(cuts, 60);
     // A lying blosc header (the block claims more bytes than its leaf holds) is refused without decoding.
-    std::string bytes = readFile(samples[0]);
-    const std::size_t at = vdb_mutants::findBloscHeader(bytes, 6144);
-    ASSERT_NE(at, std::string::npos);
-    const uint32_t lie = 8182;
-    std::memcpy(&bytes[at + 4], &lie, 4);
-    const std::string path = (mDir / "lying.vdb").string();
-    writeFile(path, bytes);
+    const std::string path = writeLyingLeaf(samples[0], mDir, "lying.vdb");
+    ASSERT_FALSE(path.empty()) << "no full vec3s leaf block in the sample";
     EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkVdbStructure(path, vdbexport::VdbCheckDepth::Layout); }),
                     "claims 8182 bytes where 6144 are expected");
 }
