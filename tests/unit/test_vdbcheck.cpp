@@ -23,7 +23,6 @@
 #include <fstream>
 #include <functional>
 #include <map>
-
 #include <thread>
 
 #include <unistd.h>
@@ -365,10 +364,15 @@ TEST_F(VdbCheckTest, TheChildRunsBesideLayerOneAndIsStoppedWhenLayerOneRefuses)
     pid_t child = -1;
     {
         vdbexport::IsolatedCheck check = vdbexport::startIsolatedCheck(samples[0]);
-        for (int i = 0; i < 3000 && !fs::exists(pidFile); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-        ASSERT_TRUE(fs::exists(pidFile)) << "the child did not start";
-        std::this_thread::sleep_for(std::chrono::milliseconds(50)); // its pid written in full
-        child = pid_t(std::stol(readFile(pidFile.string())));
+        // The pid is there once its line is written in full (up to its newline).
+        std::string written;
+        for (int i = 0; i < 3000; ++i) {
+            if (fs::exists(pidFile)) written = readFile(pidFile.string());
+            if (!written.empty() && written.back() == '\n') break;
+            std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        }
+        ASSERT_TRUE(!written.empty() && written.back() == '\n') << "the child did not start";
+        child = pid_t(std::stol(written));
         ASSERT_GT(child, 0);
         EXPECT_EQ(::kill(child, 0), 0) << "the child runs while the check is held";
     } // dropped unfinished

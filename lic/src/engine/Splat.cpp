@@ -236,9 +236,10 @@ using Xform = std::array<float, 9>;
 /// One spot's streamline, output-index positions every h.
 struct SpotLine
 {
-    const openvdb::Vec3f* points = nullptr;   // the samples (SplatRun's per-line storage)
-    const openvdb::Vec3f* tangents = nullptr; // unit direction at each sample
-    const Xform* xforms = nullptr;            // the transport back to the spot at each sample
+    // Made by the thread that traced the line (no serial packing pass afterwards).
+    std::vector<openvdb::Vec3f> points;   // the samples
+    std::vector<openvdb::Vec3f> tangents; // unit direction at each sample
+    std::vector<Xform> xforms;            // the transport back to the spot at each sample
     int count = 0;           // samples
     int centre = 0;          // index of the spot itself among them
     double endBack = -1e300; // arc of a natural end upstream (a wall or critical point), else −∞
@@ -397,14 +398,6 @@ private:
     TraceSettings mTrace; // along a spot's line: over the kernel's support each way
     int mStride = 1;
     std::vector<SpotLine> mLines;
-    /// Every line's samples, unit directions and transports, one allocation per line (as traced:
-    /// no serial packing pass).
-    struct LineSamples
-    {
-        std::vector<openvdb::Vec3f> points, tangents;
-        std::vector<Xform> xforms;
-    };
-    std::vector<LineSamples> mSamples;
 };
 
 std::uint64_t SplatRun::traceLines()
@@ -413,25 +406,21 @@ std::uint64_t SplatRun::traceLines()
     mTrace = detail::traceSettings(mField, mDomain, mSettings);
     mTrace.maxSamples = int(std::ceil((std::max(-mTauMin, mTauMax) + 1.0) / mH));
     mStride = detail::integrationStride(mDomain, mSettings);
-    mSamples.assign(n, LineSamples{});
     mLines.assign(n, SpotLine{});
     tbb::enumerable_thread_specific<std::pair<std::vector<openvdb::Vec3f>, std::vector<openvdb::Vec3d>>> tls;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 64), [&](const auto& r) {
         auto& [back, scratch] = tls.local();
         for (std::size_t s = r.begin(); s != r.end(); ++s) {
-            LineSamples& ls = mSamples[s];
-            traceLine(s, back, scratch, ls.points, ls.xforms);
+            SpotLine& L = mLines[s];
+            traceLine(s, back, scratch, L.points, L.xforms);
             // Unit direction at every sample (central differences; one-sided at the ends).
-            const std::vector<openvdb::Vec3f>& p = ls.points;
-            ls.tangents.resize(p.size());
+            const std::vector<openvdb::Vec3f>& p = L.points;
+            L.tangents.resize(p.size());
             for (int j = 0; j < int(p.size()); ++j) {
                 openvdb::Vec3f t = p[std::size_t(std::min(int(p.size()) - 1, j + 1))] - p[std::size_t(std::max(0, j - 1))];
                 const float tl = t.length();
-                ls.tangents[std::size_t(j)] = tl > 0 ? t / tl : openvdb::Vec3f(0.0f);
+                L.tangents[std::size_t(j)] = tl > 0 ? t / tl : openvdb::Vec3f(0.0f);
             }
-            mLines[s].points = ls.points.data();
-            mLines[s].tangents = ls.tangents.data();
-            mLines[s].xforms = ls.xforms.data();
         }
     });
     std::uint64_t samples = 0;
@@ -543,8 +532,8 @@ void SplatRun::nearestPoints(const SpotLine& L, const Brick& brick, SplatScratch
     // direction at j picks the sample jf, then the distance to the line through P_jf along its
     // direction (samples are h apart, so this is the segment distance to within h²/8). All in
     // float: positions are output index units.
-    const openvdb::Vec3f* P = L.points;
-    const openvdb::Vec3f* T = L.tangents;
+    const openvdb::Vec3f* P = L.points.data();
+    const openvdb::Vec3f* T = L.tangents.data();
     const BrickIndex& bi = sc.index;
     const std::uint32_t gen = sc.generation;
     const openvdb::Coord bmin = brick.box.min(), bmax = brick.box.max();
@@ -659,7 +648,7 @@ std::uint64_t SplatRun::depositSpot(const SpotLine& L, float weight, SplatScratc
     // A spot within reach of where its line ends: part of it lies beyond the wall, where no window
     // sample can see it; sum its windows directly instead of from the tables.
     const bool nearWall = L.endFwd < reach + h || L.endBack > -(reach + h);
-    const Xform* G = L.xforms;
+    const Xform* G = L.xforms.data();
     const openvdb::Vec3d t0(L.tangent);
     std::uint64_t deposits = 0;
     for (std::int64_t l : sc.touched) {

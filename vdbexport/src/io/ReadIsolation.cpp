@@ -91,21 +91,6 @@ IsolatedCheck::IsolatedCheck(IsolatedCheck&& o) noexcept
 {
 }
 
-IsolatedCheck& IsolatedCheck::operator=(IsolatedCheck&& o) noexcept
-{
-    if (this != &o) {
-        stop();
-        mPid = std::exchange(o.mPid, -1);
-        mErrFd = std::exchange(o.mErrFd, -1);
-        mPath = std::move(o.mPath);
-        mReader = std::move(o.mReader);
-        mExpected = std::move(o.mExpected);
-        mLimit = o.mLimit;
-        mT0 = o.mT0;
-    }
-    return *this;
-}
-
 IsolatedCheck::~IsolatedCheck() { stop(); }
 
 void IsolatedCheck::stop() noexcept

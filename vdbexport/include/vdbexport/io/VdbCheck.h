@@ -106,7 +106,7 @@ class IsolatedCheck
 public:
     IsolatedCheck() = default;
     IsolatedCheck(IsolatedCheck&& other) noexcept;
-    IsolatedCheck& operator=(IsolatedCheck&& other) noexcept;
+    IsolatedCheck& operator=(IsolatedCheck&&) = delete;
     IsolatedCheck(const IsolatedCheck&) = delete;
     IsolatedCheck& operator=(const IsolatedCheck&) = delete;
     ~IsolatedCheck();
