@@ -371,6 +371,37 @@ TEST(SplatComets, MoveDownstreamInTheTabbedJet)
     }
 }
 
+TEST(SplatComets, TheBrickSizeChangesNoValue)
+{
+    // Splat bricks only split where deposits land (each footprint is rasterised by every brick it
+    // reaches, from the one trace, in spot order), so a comet loop in 32³ bricks (their default:
+    // N·C accumulators per voxel) has the same bits as in 16³ or 64³ bricks.
+    const VelocityField field(makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36)).velocity);
+    const OutputDomain domain(field, 2);
+    const SpotSet set = poissonSpots(domain, 7.0, 5);
+    LicSettings s;
+    s.engine = EngineType::Splat;
+    s.length = 8;
+    s.comets = 6;
+    EXPECT_EQ(brickDim(s), 32);
+    std::vector<std::vector<float>> ref;
+    for (int brick : {0, 16, 64}) {
+        s.brick = brick;
+        const LicResult r = convolveSpots(field, domain, set, {1.0, 2.0}, 2.0, s);
+        EXPECT_EQ(r.stats.brickDim, brick == 0 ? 32 : brick);
+        if (brick == 0) {
+            ref = r.channels;
+            continue;
+        }
+        ASSERT_EQ(r.channels.size(), ref.size());
+        for (std::size_t k = 0; k < ref.size(); ++k)
+            EXPECT_EQ(0, std::memcmp(ref[k].data(), r.channels[k].data(), ref[k].size() * sizeof(float)))
+                << "channel " << k << ", " << brick << "³ bricks";
+    }
+    s.comets = 0; // stills keep 64³ bricks
+    EXPECT_EQ(brickDim(s), 64);
+}
+
 TEST(SplatComets, OneTraceServesEveryFrameAndThreadsAgree)
 {
     // A comet loop traces one line per spot, as a still does (longer: the train's extent), and is

@@ -119,7 +119,8 @@ private:
 /// @throw lic::InputError for invalid settings or radii; lic::Cancelled.
 LicStats splatSpotBricks(const ConvolveJob& job, const SpotInput& spots, const BrickSink& sink);
 
-/// The splat engine's policy (its row of the engine table): 64³ bricks whatever the kernel; the
+/// The splat engine's policy (its row of the engine table): 64³ bricks whatever the kernel (32³ for
+/// comet loops, whose N·C accumulators per voxel would not stay in cache); the
 /// reach of a spot (its line's support and the footprint the rasteriser covers around it); the
 /// field its lines sample.
 int splatBrickDim(const LicSettings& settings);
