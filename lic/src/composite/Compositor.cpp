@@ -51,6 +51,8 @@ Compositor::Compositor(const CompositeSettings& settings, CompositeInputs inputs
         for (auto& set : mRawLeaves) set.init(blocks);
         if (s.spots && mInputs.width && s.levels > 1) mWidthLeaves.init(blocks);
         if (mInputs.roi) mRoiLeaves.init(blocks);
+    } else if (s.frames > 1) {
+        mLoopBlocks.resize(blocks);
     } else {
         mSpotFrames.resize(std::size_t(s.frames));
         for (SpotFrame& fr : mSpotFrames) {
@@ -136,6 +138,13 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
     // roi ≤ 1; the 0.99 keeps float rounding of the blend from reaching the threshold, so a voxel
     // is ruled out only where keepSpotVoxel would drop it too.
     const int boundChannels = s.spots && s.composesOnArrival() ? frames * s.textureChannels() : 0;
+    thread_local LoopStage stage;
+    LoopStage* loop = mLoopBlocks.empty() ? nullptr : &stage;
+    if (loop) {
+        stage.kept.setOff();
+        stage.count = 0;
+        stage.values.resize(V * std::size_t(frames * loopValues()));
+    }
     std::optional<ScalarField::BlockSampler> widthAt, roiAt;
     if (mInputs.width) widthAt.emplace(mInputs.width, mDomain).setBlock(origin);
     if (mInputs.roi) roiAt.emplace(mInputs.roi, mDomain).setBlock(origin);
@@ -154,7 +163,7 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
         }
         const float roi = roiAt ? roiWeight(roiAt->at(off), s.roiRange[0], s.roiRange[1]) : 1.0f;
         if (s.spots) {
-            if (!keepSpotVoxel(raw, widthT, roi, b, origin, off)) continue;
+            if (!keepSpotVoxel(raw, widthT, roi, b, origin, off, loop)) continue;
         } else {
             moments.add(frames > 1 ? rippleFrameValue(raw(0), raw(1), raw(2), raw(3), raw(4), mPhases[0])
                                    : raw(0));
@@ -166,11 +175,65 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
         }
         addStatic(b, origin, off, mDomain.coordOf(b * V + off), noise);
     }
+    if (loop && stage.count > 0) keepLoopBlock(b, stage);
+}
+
+void Compositor::keepLoopBlock(std::size_t b, const LoopStage& stage)
+{
+    // Voxel-major staging → frame-major store: a frame is then one contiguous run per block.
+    const std::size_t n = stage.count, per = std::size_t(mSettings.frames * loopValues());
+    LoopBlock& lb = mLoopBlocks[b];
+    lb.kept = stage.kept;
+    lb.count = stage.count;
+    lb.values = std::make_unique_for_overwrite<float[]>(n * per);
+    for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t k = 0; k < per; ++k) lb.values[k * n + i] = stage.values[i * per + k];
+}
+
+void Compositor::loopFrameGrids(int f, openvdb::GridPtrVec& grids)
+{
+    const int K = mSettings.levels, series = mSettings.writeSeries ? K : 0, per = loopValues();
+    const std::size_t blocks = mDomain.blockCount();
+    LeafSet<openvdb::FloatGrid> density, halo;
+    const auto levelSets = static_cast<std::size_t>(series);
+    std::vector<LeafSet<openvdb::FloatGrid>> lines(levelSets), halos(levelSets);
+    density.init(blocks);
+    halo.init(blocks);
+    for (auto& set : lines) set.init(blocks);
+    for (auto& set : halos) set.init(blocks);
+    const ThreadLimit threadLimit(mSettings.threads);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const auto& range) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b) {
+            const LoopBlock& lb = mLoopBlocks[b];
+            if (lb.count == 0) continue;
+            const std::size_t n = lb.count;
+            const float* v = lb.values.get() + std::size_t(f - 1) * std::size_t(per) * n;
+            const openvdb::Coord origin = mDomain.blockOrigin(b);
+            auto fill = [&](LeafSet<openvdb::FloatGrid>& set, const float* run) {
+                FloatLeaf& leaf = set.make(b, origin);
+                std::size_t i = 0;
+                for (auto on = lb.kept.beginOn(); on; ++on) leaf.setValueOn(on.pos(), run[i++]);
+            };
+            fill(density, v);
+            fill(halo, v + n);
+            for (int k = 0; k < series; ++k) {
+                fill(lines[std::size_t(k)], v + std::size_t(2 + k) * n);
+                fill(halos[std::size_t(k)], v + std::size_t(2 + K + k) * n);
+            }
+        }
+    });
+    grids.push_back(density.release(mDomain, "density"));
+    grids.push_back(halo.release(mDomain, "halo"));
+    for (int k = 0; k < series; ++k) {
+        grids.push_back(lines[std::size_t(k)].release(mDomain, "density_w" + std::to_string(k + 1)));
+        grids.push_back(halos[std::size_t(k)].release(mDomain, "halo_w" + std::to_string(k + 1)));
+    }
+    if (f == mSettings.frames) mLoopBlocks.clear(); // the last frame: the values are not needed any more
 }
 
 template<typename Raw>
 bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::size_t b, const openvdb::Coord& origin,
-                               openvdb::Index off)
+                               openvdb::Index off, LoopStage* stage)
 {
     const int frames = mSettings.frames;
     auto frameVoxel = [&](int f) {
@@ -184,7 +247,24 @@ bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::siz
     const SpotVoxel first = frameVoxel(1);
     bool shows = showsIn(first);
     for (int f = 2; f <= frames && !shows; ++f) shows = showsIn(frameVoxel(f));
-    if (!shows || mSpotFrames.empty()) return shows;
+    if (!shows) return false;
+    if (stage) {
+        const int K = mSettings.levels, per = loopValues();
+        float* out = stage->values.data() + std::size_t(stage->count) * std::size_t(frames * per);
+        for (int f = 1; f <= frames; ++f, out += per) {
+            const SpotVoxel sv = f == 1 ? first : frameVoxel(f);
+            out[0] = sv.density;
+            out[1] = sv.halo;
+            for (int k = 0; k < per / 2 - 1; ++k) {
+                out[2 + k] = sv.lines[k];
+                out[2 + K + k] = sv.halos[k];
+            }
+        }
+        stage->kept.setOn(off);
+        ++stage->count;
+        return true;
+    }
+    if (mSpotFrames.empty()) return true;
     for (int f = 1; f <= frames; ++f) {
         const SpotVoxel sv = f == 1 ? first : frameVoxel(f);
         SpotFrame& fr = mSpotFrames[std::size_t(f - 1)];
@@ -340,7 +420,9 @@ openvdb::GridPtrVec Compositor::frame(int f)
             grids.push_back(halos[std::size_t(k)].release(mDomain, "halo_w" + std::to_string(k + 1)));
         }
     };
-    if (mSettings.composesOnArrival()) {
+    if (mSettings.composesOnArrival() && frames > 1) {
+        loopFrameGrids(f, grids);
+    } else if (mSettings.composesOnArrival()) {
         SpotFrame& fr = mSpotFrames[std::size_t(f - 1)];
         grids.push_back(fr.density.release(mDomain, "density"));
         grids.push_back(fr.halo.release(mDomain, "halo"));

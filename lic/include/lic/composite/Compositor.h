@@ -22,6 +22,8 @@
 #include <openvdb/openvdb.h>
 
 #include <array>
+#include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -125,9 +127,23 @@ private:
     void consumeBlock(const BrickChannels& bc, std::size_t i, Moments& moments);
     /// Whether a spot voxel is kept (line or halo shows in some frame); a still's and a comet
     /// loop's final values are stored here.
+    /// A comet loop's kept voxels of the block being consumed: their offsets and every frame's
+    /// values, voxel-major (per voxel: frame 1's loopValues(), frame 2's, …).
+    struct LoopStage
+    {
+        openvdb::util::NodeMask<3> kept;
+        std::vector<float> values;
+        std::uint32_t count = 0;
+    };
     template<typename Raw>
     bool keepSpotVoxel(const Raw& raw, float widthT, float roi, std::size_t b, const openvdb::Coord& origin,
-                       openvdb::Index off);
+                       openvdb::Index off, LoopStage* stage);
+    /// Values per voxel and frame of a comet loop: density, halo (+ each level's line and halo).
+    int loopValues() const { return 2 + (mSettings.writeSeries ? 2 * mSettings.levels : 0); }
+    /// Store a consumed block's staged comet-loop values frame-major in mLoopBlocks[b].
+    void keepLoopBlock(std::size_t b, const LoopStage& stage);
+    /// A comet loop's frame f grids (density, halo, levels) from mLoopBlocks, on every core.
+    void loopFrameGrids(int f, openvdb::GridPtrVec& grids);
     /// The grids every frame shares (input, tangent, colour, scalar) at one voxel.
     void addStatic(std::size_t b, const openvdb::Coord& origin, openvdb::Index off, const openvdb::Coord& ijk,
                    const NoiseTexture* noise);
@@ -145,14 +161,26 @@ private:
     // Per-voxel data kept until the frames are written.
     std::vector<LeafSet<openvdb::FloatGrid>> mRawLeaves;  // loops and noise: the brick's channels
     LeafSet<openvdb::FloatGrid> mWidthLeaves, mRoiLeaves;  // loops: width blend t, ROI post-mask
-    /// Spot stills and comet loops: each frame's final values (lines and halos per level with
-    /// writeSeries), composed as the bricks arrive.
+    /// Spot stills: the final values (lines and halos per level with writeSeries), composed as
+    /// the bricks arrive.
     struct SpotFrame
     {
         LeafSet<openvdb::FloatGrid> density, halo;
         std::vector<LeafSet<openvdb::FloatGrid>> lines, halos;
     };
     std::vector<SpotFrame> mSpotFrames;
+    /// Comet loops: per block, the voxels some frame shows and every frame's final values,
+    /// frame-major ([frame][value][kept voxel], loopValues() values). Composed as the bricks
+    /// arrive, like a still, but kept compact (a block's kept voxels are ~1/4 of its 512, and a
+    /// leaf per frame and grid would hold all 512): each frame's leaves are made when it is
+    /// written and freed after, so the frames in flight reuse the same memory.
+    struct LoopBlock
+    {
+        openvdb::util::NodeMask<3> kept;
+        std::unique_ptr<float[]> values;
+        std::uint32_t count = 0;
+    };
+    std::vector<LoopBlock> mLoopBlocks;
     LeafSet<openvdb::FloatGrid> mInputLeaves, mScalarLeaves;
     LeafSet<openvdb::Vec3SGrid> mTangentLeaves, mVelocityLeaves, mColorLeaves;
     std::vector<FramePhase> mPhases; // a loop's frames 1 … N (ripple phases)
