@@ -348,6 +348,37 @@ TEST_F(StreamBake, SplatBakesAgreeWithNaiveAndKeepEveryFeature)
     EXPECT_GT(s3["density_active_voxels"].get<int>(), 1000);
 }
 
+TEST_F(StreamBake, ACometLoopsWidthSeriesHoldsEachLevelOfEachFrame)
+{
+    // Two widths, no width scalar: the composite is the narrowest level, so in every frame
+    // density and halo are density_w1 and halo_w1 bit for bit, while the wider level differs,
+    // and each level moves from frame to frame (the loop keeps every frame's levels compact
+    // until it writes them).
+    auto r = spotRecipe("series_loop.vdb");
+    r.lic.engine = "splat";
+    r.input.radii = {1.0, 2.0};
+    r.width.reset();
+    r.color.reset();
+    r.animation.frames = 4;
+    vdbexport::bake(r);
+    std::vector<std::map<std::string, openvdb::GridBase::Ptr>> frames(4);
+    for (int f = 1; f <= 4; ++f) {
+        for (const auto& g : readAll(vdbexport::framePath(r.output.path, f, 4))) frames[std::size_t(f - 1)][g->getName()] = g;
+        auto& grids = frames[std::size_t(f - 1)];
+        for (const char* name : {"density", "halo", "density_w1", "halo_w1", "density_w2", "halo_w2"})
+            ASSERT_TRUE(grids.count(name)) << name << " in frame " << f;
+        EXPECT_GT(grids["density"]->activeVoxelCount(), 1000u);
+        EXPECT_TRUE(sameGrid<openvdb::FloatGrid>(*grids["density"], *grids["density_w1"])) << "frame " << f;
+        EXPECT_TRUE(sameGrid<openvdb::FloatGrid>(*grids["halo"], *grids["halo_w1"])) << "frame " << f;
+        EXPECT_FALSE(sameGrid<openvdb::FloatGrid>(*grids["density_w1"], *grids["density_w2"])) << "frame " << f;
+        EXPECT_FALSE(sameGrid<openvdb::FloatGrid>(*grids["halo_w2"], *grids["density_w2"])) << "frame " << f;
+    }
+    for (int f = 1; f < 4; ++f)
+        for (const char* name : {"density_w1", "halo_w1", "density_w2", "halo_w2"})
+            EXPECT_FALSE(sameGrid<openvdb::FloatGrid>(*frames[std::size_t(f - 1)][name], *frames[std::size_t(f)][name]))
+                << name << " did not move from frame " << f;
+}
+
 TEST_F(StreamBake, ALoopTracesTheSameStreamlinesAsAStill)
 {
     auto still = recipe("trace_still.vdb");
