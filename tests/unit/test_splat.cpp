@@ -31,6 +31,22 @@ SpotSet poissonSpots(const OutputDomain& domain, double spacing, std::uint64_t s
     return set;
 }
 
+/// The small tabbed jet (24 × 24 × 36, upsample 2), Poisson spots `spacing` apart and splat
+/// settings of length 8.
+struct SmallJetSpots
+{
+    VelocityField field{makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36)).velocity};
+    OutputDomain domain{field, 2};
+    SpotSet set;
+    LicSettings settings;
+    SmallJetSpots(double spacing, std::uint64_t seed)
+        : set(poissonSpots(domain, spacing, seed))
+    {
+        settings.engine = EngineType::Splat;
+        settings.length = 8;
+    }
+};
+
 /// Pearson correlation over active voxels where either value exceeds 0.001.
 double correlation(const OutputDomain& d, const std::vector<float>& a, const std::vector<float>& b)
 {
@@ -216,12 +232,9 @@ TEST(Splat, WorkFollowsTheLinesNotTheBox)
 
 TEST(Splat, ALoopTracesTheSameLinesAsAStill)
 {
-    const VelocityField field(makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36)).velocity);
-    const OutputDomain domain(field, 2);
-    const SpotSet set = poissonSpots(domain, 7.0, 5);
-    LicSettings s;
-    s.engine = EngineType::Splat;
-    s.length = 8;
+    SmallJetSpots jet(7.0, 5);
+    const auto& [field, domain, set, unused] = jet;
+    LicSettings& s = jet.settings;
     const LicResult still = convolveSpots(field, domain, set, {1.0}, 2.0, s);
     s.ripple = true;
     const LicResult loop = convolveSpots(field, domain, set, {1.0}, 2.0, s);
@@ -376,12 +389,9 @@ TEST(SplatComets, TheBrickSizeChangesNoValue)
     // Splat bricks only split where deposits land (each footprint is rasterised by every brick it
     // reaches, from the one trace, in spot order), so a comet loop in 32³ bricks (their default:
     // N·C accumulators per voxel) has the same bits as in 16³ or 64³ bricks.
-    const VelocityField field(makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36)).velocity);
-    const OutputDomain domain(field, 2);
-    const SpotSet set = poissonSpots(domain, 7.0, 5);
-    LicSettings s;
-    s.engine = EngineType::Splat;
-    s.length = 8;
+    SmallJetSpots jet(7.0, 5);
+    const auto& [field, domain, set, unused] = jet;
+    LicSettings& s = jet.settings;
     s.comets = 6;
     EXPECT_EQ(brickDim(s), 32);
     std::vector<std::vector<float>> ref;
