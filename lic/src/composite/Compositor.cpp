@@ -249,13 +249,13 @@ bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::siz
     for (int f = 2; f <= frames && !shows; ++f) shows = showsIn(frameVoxel(f));
     if (!shows) return false;
     if (stage) {
-        const int K = mSettings.levels, per = loopValues();
+        const int K = mSettings.levels, series = mSettings.writeSeries ? K : 0, per = loopValues();
         float* out = stage->values.data() + std::size_t(stage->count) * std::size_t(frames * per);
         for (int f = 1; f <= frames; ++f, out += per) {
             const SpotVoxel sv = f == 1 ? first : frameVoxel(f);
             out[0] = sv.density;
             out[1] = sv.halo;
-            for (int k = 0; k < per / 2 - 1; ++k) {
+            for (int k = 0; k < series; ++k) {
                 out[2 + k] = sv.lines[k];
                 out[2 + K + k] = sv.halos[k];
             }

@@ -301,7 +301,8 @@ void transports(const VelocityField& field, const OutputDomain& domain, const st
 
 /// A float array that grows without zeroing: the splat writes every part it reads first (a block's
 /// accumulators when a footprint first reaches it, a touched block's hand-over), and a comet
-/// loop's 64³ × N·C floats (50 MB at 24 frames) would otherwise be zeroed and faulted in whole.
+/// loop's brick × N·C floats (48 MiB for a 64³ brick at 24 frames) would otherwise be zeroed and
+/// faulted in whole.
 class GrowingBuffer
 {
 public:

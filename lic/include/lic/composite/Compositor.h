@@ -125,8 +125,6 @@ private:
     template<typename Raw>
     SpotVoxel composeSpots(const Raw& raw, float widthT, float roi) const;
     void consumeBlock(const BrickChannels& bc, std::size_t i, Moments& moments);
-    /// Whether a spot voxel is kept (line or halo shows in some frame); a still's and a comet
-    /// loop's final values are stored here.
     /// A comet loop's kept voxels of the block being consumed: their offsets and every frame's
     /// values, voxel-major (per voxel: frame 1's loopValues(), frame 2's, …).
     struct LoopStage
@@ -135,6 +133,8 @@ private:
         std::vector<float> values;
         std::uint32_t count = 0;
     };
+    /// Whether a spot voxel is kept (line or halo shows in some frame); a still's final values are
+    /// stored here, a comet loop's staged in `stage`.
     template<typename Raw>
     bool keepSpotVoxel(const Raw& raw, float widthT, float roi, std::size_t b, const openvdb::Coord& origin,
                        openvdb::Index off, LoopStage* stage);
