@@ -54,16 +54,13 @@ Compositor::Compositor(const CompositeSettings& settings, CompositeInputs inputs
     } else if (s.frames > 1) {
         mLoopBlocks.resize(blocks);
     } else {
-        mSpotFrames.resize(std::size_t(s.frames));
-        for (SpotFrame& fr : mSpotFrames) {
-            fr.density.init(blocks);
-            fr.halo.init(blocks);
-            if (s.writeSeries) {
-                fr.lines.resize(std::size_t(s.levels));
-                fr.halos.resize(std::size_t(s.levels));
-                for (auto& set : fr.lines) set.init(blocks);
-                for (auto& set : fr.halos) set.init(blocks);
-            }
+        mStill.density.init(blocks);
+        mStill.halo.init(blocks);
+        if (s.writeSeries) {
+            mStill.lines.resize(std::size_t(s.levels));
+            mStill.halos.resize(std::size_t(s.levels));
+            for (auto& set : mStill.lines) set.init(blocks);
+            for (auto& set : mStill.halos) set.init(blocks);
         }
     }
     if (s.writeInput) mInputLeaves.init(blocks);
@@ -190,24 +187,18 @@ void Compositor::keepLoopBlock(std::size_t b, const LoopStage& stage)
         for (std::size_t k = 0; k < per; ++k) lb.values[k * n + i] = stage.values[i * per + k];
 }
 
-void Compositor::loopFrameGrids(int f, openvdb::GridPtrVec& grids)
+void Compositor::composeLoopLeaves(int f, LeafSet<openvdb::FloatGrid>& density, LeafSet<openvdb::FloatGrid>& halo,
+                                   std::vector<LeafSet<openvdb::FloatGrid>>& lines,
+                                   std::vector<LeafSet<openvdb::FloatGrid>>& halos)
 {
-    const int K = mSettings.levels, series = mSettings.writeSeries ? K : 0, per = loopValues();
-    const std::size_t blocks = mDomain.blockCount();
-    LeafSet<openvdb::FloatGrid> density, halo;
-    const auto levelSets = static_cast<std::size_t>(series);
-    std::vector<LeafSet<openvdb::FloatGrid>> lines(levelSets), halos(levelSets);
-    density.init(blocks);
-    halo.init(blocks);
-    for (auto& set : lines) set.init(blocks);
-    for (auto& set : halos) set.init(blocks);
+    const std::size_t K = std::size_t(mSettings.levels), per = std::size_t(loopValues());
     const ThreadLimit threadLimit(mSettings.threads);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const auto& range) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mDomain.blockCount()), [&](const auto& range) {
         for (std::size_t b = range.begin(); b != range.end(); ++b) {
             const LoopBlock& lb = mLoopBlocks[b];
             if (lb.count == 0) continue;
             const std::size_t n = lb.count;
-            const float* v = lb.values.get() + std::size_t(f - 1) * std::size_t(per) * n;
+            const float* v = lb.values.get() + std::size_t(f - 1) * per * n;
             const openvdb::Coord origin = mDomain.blockOrigin(b);
             auto fill = [&](LeafSet<openvdb::FloatGrid>& set, const float* run) {
                 FloatLeaf& leaf = set.make(b, origin);
@@ -216,19 +207,12 @@ void Compositor::loopFrameGrids(int f, openvdb::GridPtrVec& grids)
             };
             fill(density, v);
             fill(halo, v + n);
-            for (int k = 0; k < series; ++k) {
-                fill(lines[std::size_t(k)], v + std::size_t(2 + k) * n);
-                fill(halos[std::size_t(k)], v + std::size_t(2 + K + k) * n);
+            for (std::size_t k = 0; k < lines.size(); ++k) {
+                fill(lines[k], v + (2 + k) * n);
+                fill(halos[k], v + (2 + K + k) * n);
             }
         }
     });
-    grids.push_back(density.release(mDomain, "density"));
-    grids.push_back(halo.release(mDomain, "halo"));
-    for (int k = 0; k < series; ++k) {
-        grids.push_back(lines[std::size_t(k)].release(mDomain, "density_w" + std::to_string(k + 1)));
-        grids.push_back(halos[std::size_t(k)].release(mDomain, "halo_w" + std::to_string(k + 1)));
-    }
-    if (f == mSettings.frames) mLoopBlocks.clear(); // the last frame: the values are not needed any more
 }
 
 template<typename Raw>
@@ -236,23 +220,23 @@ bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::siz
                                openvdb::Index off, LoopStage* stage)
 {
     const int frames = mSettings.frames;
+    auto showsIn = [](const SpotVoxel& sv) { return sv.density > kSparseEpsilon || sv.halo > kSparseEpsilon; };
     auto frameVoxel = [&](int f) {
         if (frames == 1) return composeSpots(raw, widthT, roi);
         const FramePhase& ph = mPhases[std::size_t(f - 1)];
         return composeSpots([&](int c) { return loopFrameValue(mSettings, raw, c, f, ph); }, widthT, roi);
     };
-    auto showsIn = [](const SpotVoxel& sv) { return sv.density > kSparseEpsilon || sv.halo > kSparseEpsilon; };
     // Kept when any frame of the loop shows line or halo here, so every frame file has the same
     // topology.
-    const SpotVoxel first = frameVoxel(1);
-    bool shows = showsIn(first);
-    for (int f = 2; f <= frames && !shows; ++f) shows = showsIn(frameVoxel(f));
-    if (!shows) return false;
     if (stage) {
+        // A comet loop: every frame composed once, into the stage's next slot, which is taken
+        // only when some frame shows.
         const int K = mSettings.levels, series = mSettings.writeSeries ? K : 0, per = loopValues();
         float* out = stage->values.data() + std::size_t(stage->count) * std::size_t(frames * per);
+        bool shows = false;
         for (int f = 1; f <= frames; ++f, out += per) {
-            const SpotVoxel sv = f == 1 ? first : frameVoxel(f);
+            const SpotVoxel sv = frameVoxel(f);
+            shows = shows || showsIn(sv);
             out[0] = sv.density;
             out[1] = sv.halo;
             for (int k = 0; k < series; ++k) {
@@ -260,20 +244,20 @@ bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::siz
                 out[2 + K + k] = sv.halos[k];
             }
         }
+        if (!shows) return false;
         stage->kept.setOn(off);
         ++stage->count;
         return true;
     }
-    if (mSpotFrames.empty()) return true;
-    for (int f = 1; f <= frames; ++f) {
-        const SpotVoxel sv = f == 1 ? first : frameVoxel(f);
-        SpotFrame& fr = mSpotFrames[std::size_t(f - 1)];
-        fr.density.leaf(b, origin).setValueOn(off, sv.density);
-        fr.halo.leaf(b, origin).setValueOn(off, sv.halo);
-        for (std::size_t k = 0; k < fr.lines.size(); ++k) {
-            fr.lines[k].leaf(b, origin).setValueOn(off, sv.lines[k]);
-            fr.halos[k].leaf(b, origin).setValueOn(off, sv.halos[k]);
-        }
+    const SpotVoxel first = frameVoxel(1);
+    bool shows = showsIn(first);
+    for (int f = 2; f <= frames && !shows; ++f) shows = showsIn(frameVoxel(f));
+    if (!shows || !mStill.density.enabled()) return shows; // a gather engine's loop keeps raw channels
+    mStill.density.leaf(b, origin).setValueOn(off, first.density);
+    mStill.halo.leaf(b, origin).setValueOn(off, first.halo);
+    for (std::size_t k = 0; k < mStill.lines.size(); ++k) {
+        mStill.lines[k].leaf(b, origin).setValueOn(off, first.lines[k]);
+        mStill.halos[k].leaf(b, origin).setValueOn(off, first.halos[k]);
     }
     return true;
 }
@@ -420,16 +404,13 @@ openvdb::GridPtrVec Compositor::frame(int f)
             grids.push_back(halos[std::size_t(k)].release(mDomain, "halo_w" + std::to_string(k + 1)));
         }
     };
-    if (mSettings.composesOnArrival() && frames > 1) {
-        loopFrameGrids(f, grids);
-    } else if (mSettings.composesOnArrival()) {
-        SpotFrame& fr = mSpotFrames[std::size_t(f - 1)];
-        grids.push_back(fr.density.release(mDomain, "density"));
-        grids.push_back(fr.halo.release(mDomain, "halo"));
-        addLevels(fr.lines, fr.halos);
-        fr = SpotFrame{};
+    if (mSettings.composesOnArrival() && frames == 1) {
+        grids.push_back(mStill.density.release(mDomain, "density"));
+        grids.push_back(mStill.halo.release(mDomain, "halo"));
+        addLevels(mStill.lines, mStill.halos);
+        mStill = SpotFrame{};
     } else {
-        // Compose this frame leaf by leaf from the kept channels.
+        // Compose this frame leaf by leaf from the kept channels (a comet loop: its kept values).
         LeafSet<openvdb::FloatGrid> density, halo;
         std::vector<LeafSet<openvdb::FloatGrid>> lines, halos;
         density.init(blocks);
@@ -442,7 +423,8 @@ openvdb::GridPtrVec Compositor::frame(int f)
                 for (auto& s : halos) s.init(blocks);
             }
         }
-        composeLeaves(f, density, halo, lines, halos);
+        if (mSettings.composesOnArrival()) composeLoopLeaves(f, density, halo, lines, halos);
+        else composeLeaves(f, density, halo, lines, halos);
         if (!spots && last && frames == 1) {
             grids.push_back(mRawLeaves[0].release(mDomain, "density"));
         } else {
@@ -456,6 +438,7 @@ openvdb::GridPtrVec Compositor::frame(int f)
             mRawLeaves.clear();
             mWidthLeaves = {};
             mRoiLeaves = {};
+            mLoopBlocks.clear();
         }
     }
     buildStatic();

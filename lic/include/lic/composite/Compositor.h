@@ -142,8 +142,10 @@ private:
     int loopValues() const { return 2 + (mSettings.writeSeries ? 2 * mSettings.levels : 0); }
     /// Store a consumed block's staged comet-loop values frame-major in mLoopBlocks[b].
     void keepLoopBlock(std::size_t b, const LoopStage& stage);
-    /// A comet loop's frame f grids (density, halo, levels) from mLoopBlocks, on every core.
-    void loopFrameGrids(int f, openvdb::GridPtrVec& grids);
+    /// A comet loop's frame f leaves (density, halo, levels) from mLoopBlocks, on every core.
+    void composeLoopLeaves(int f, LeafSet<openvdb::FloatGrid>& density, LeafSet<openvdb::FloatGrid>& halo,
+                           std::vector<LeafSet<openvdb::FloatGrid>>& lines,
+                           std::vector<LeafSet<openvdb::FloatGrid>>& halos);
     /// The grids every frame shares (input, tangent, colour, scalar) at one voxel.
     void addStatic(std::size_t b, const openvdb::Coord& origin, openvdb::Index off, const openvdb::Coord& ijk,
                    const NoiseTexture* noise);
@@ -168,7 +170,7 @@ private:
         LeafSet<openvdb::FloatGrid> density, halo;
         std::vector<LeafSet<openvdb::FloatGrid>> lines, halos;
     };
-    std::vector<SpotFrame> mSpotFrames;
+    SpotFrame mStill;
     /// Comet loops: per block, the voxels some frame shows and every frame's final values,
     /// frame-major ([frame][value][kept voxel], loopValues() values). Composed as the bricks
     /// arrive, like a still, but kept compact (a block's kept voxels are ~1/4 of its 512, and a
