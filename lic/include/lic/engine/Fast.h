@@ -47,7 +47,8 @@ struct FastScratch
 {
     BrickIndex index;                // the brick's local voxel numbering
     std::vector<float> weight;       // per local voxel: Σ deposit weights
-    std::vector<float> sum;          // per local voxel × K: Σ weight · value
+    std::vector<float> sum;          // per local voxel × K: Σ weight · value (a block's set when ready)
+    std::vector<std::uint8_t> sumReady; // per local block: its sums zeroed (at its first deposit)
     std::vector<std::uint8_t> hits;  // per local voxel: deposits, saturating at 255
     std::vector<openvdb::Vec3d> pts; // the RK45 tracer's world positions
     std::vector<openvdb::Vec3d> idxB, idxF, idx;  // output-index positions per side, assembled
@@ -101,6 +102,17 @@ private:
     void convolveComets(std::size_t N, bool endBack, bool endFwd);
     /// Comet loops: deposit every frame's window averages of samples lo … hi.
     void depositComets(std::size_t lo, std::size_t hi);
+    /// Voxel s's K sums (K = channels()), its block's zeroed first if no deposit reached it yet.
+    float* readySum(std::size_t s)
+    {
+        constexpr std::size_t V = OutputDomain::kBlockVoxels;
+        const std::size_t Kv = std::size_t(channels()), b = s / V;
+        if (!sc.sumReady[b]) {
+            std::fill_n(sc.sum.data() + b * V * Kv, V * Kv, 0.0f);
+            sc.sumReady[b] = 1;
+        }
+        return sc.sum.data() + s * Kv;
+    }
     /// The widest footprint of the texture's channels (a halo's radius): sets the comet spacing.
     static double maxRadius(const Texture& texture);
 
@@ -157,7 +169,11 @@ void FastEngine::brick(const VelocityField& field, const OutputDomain& domain, c
     detail::FastLines<Texture, Ripple> lines(field, domain, texture, settings, sc);
     const int K = lines.channels();
     sc.weight.assign(voxels, 0.0f);
-    sc.sum.assign(voxels * std::size_t(K), 0.0f);
+    // The sums are zeroed a block at a time when a deposit first reaches it (readySum): a brick's
+    // box holds N·C floats per voxel in a comet loop (48 MiB at 64³ and 24 frames), most of them
+    // in blocks no line reaches or outside the domain.
+    if (sc.sum.size() < voxels * std::size_t(K)) sc.sum.resize(voxels * std::size_t(K));
+    sc.sumReady.assign(voxels / V, 0);
     sc.hits.assign(voxels, 0);
 
     // Seeds: every active voxel of the brick in scan order that has fewer than min_hits deposits
@@ -173,8 +189,10 @@ void FastEngine::brick(const VelocityField& field, const OutputDomain& domain, c
         }
     }
 
-    // Normalise into the brick's output blocks.
-    out.assign(brick.blocks.size() * std::size_t(K) * V, 0.0f);
+    // Normalise into the brick's output blocks: every value of every block is written (0 where no
+    // line deposited or the voxel is inactive), so the buffer is not cleared first.
+    // It only grows (a vector's growth zero-fills, and bricks have different block counts).
+    if (out.size() < brick.blocks.size() * std::size_t(K) * V) out.resize(brick.blocks.size() * std::size_t(K) * V);
     for (std::size_t i = 0; i < brick.blocks.size(); ++i) {
         const std::uint32_t b = brick.blocks[i];
         const std::size_t base = bi.localBlock(domain.blockOrigin(b)) * V;
@@ -188,6 +206,7 @@ void FastEngine::brick(const VelocityField& field, const OutputDomain& domain, c
             offs[n] = std::uint16_t(on.pos());
             invs[n++] = 1.0f / w;
         }
+        if (n < V) std::fill_n(dst, std::size_t(K) * V, 0.0f);
         detail::writeChannelMajor(
             std::size_t(K), n, [&](std::size_t j) { return std::size_t(offs[j]); },
             [&](std::size_t j, std::size_t k) { return sc.sum[(base + offs[j]) * std::size_t(K) + k] * invs[j]; }, dst);
@@ -379,7 +398,7 @@ void FastLines<Texture, Ripple>::deposit(std::size_t lo, std::size_t hi)
             o[3 * C + 1] = (ns * cs - nc * sn) * inv;
         }
         const std::size_t s = std::size_t(l);
-        float* acc = &sc.sum[s * K];
+        float* acc = readySum(s);
         for (int k = 0; k < K; ++k) acc[k] += float(w * o[k]);
         sc.weight[s] += float(w);
         if (sc.hits[s] < 255) ++sc.hits[s];
@@ -458,18 +477,18 @@ void FastLines<Texture, Ripple>::convolveComets(std::size_t N, bool endBack, boo
 template<typename Texture, bool Ripple>
 void FastLines<Texture, Ripple>::depositComets(std::size_t lo, std::size_t hi)
 {
-    const std::size_t F = std::size_t(mFrames), Wf = F * std::size_t(P), Kc = F * std::size_t(C);
+    const std::size_t F = std::size_t(mFrames), Wf = F * std::size_t(P);
     for (std::size_t i = lo; i <= hi; ++i) {
         const std::int64_t l = sc.loc[i];
         if (l < 0) continue;
         const std::size_t s = std::size_t(l);
+        float* acc = readySum(s); // also where every window is 0: the voxel's weight grows below
         // As deposit(): the first-order correction to the voxel centre, proximity-weighted.
         const openvdb::Vec3d off = OutputDomain::nearestVoxel(sc.idx[i]).asVec3d() - sc.idx[i];
         const double r2 = 1.0 + off.lengthSqr() * kDepositFalloff;
         const double w = 1.0 / (r2 * r2);
         if (i >= mWinLo && i <= mWinHi) { // elsewhere every frame's window is 0
             const double inv = 1.0 / sc.norm[i];
-            float* acc = &sc.sum[s * Kc];
             const double* Wr = &sc.movedWin[(i - mWinLo) * Wf];
             for (std::size_t f = 0; f < F; ++f) {
                 const double* Wi = Wr + f * std::size_t(P);
