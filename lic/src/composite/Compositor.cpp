@@ -126,7 +126,7 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
     const CompositeSettings& s = mSettings;
     const std::size_t b = bc.brick->blocks[i];
     const openvdb::Coord origin = mDomain.blockOrigin(b);
-    const int R = s.rawChannels(), frames = s.frames;
+    const int frames = s.frames;
     const NoiseTexture* noise = (!s.spots && s.writeInput) ? &(*mInputs.noise)(*bc.brick) : nullptr;
 
     // Spots composed on arrival (stills, comet loops): most voxels a footprint touches show in no
@@ -135,13 +135,11 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
     // roi ≤ 1; the 0.99 keeps float rounding of the blend from reaching the threshold, so a voxel
     // is ruled out only where keepSpotVoxel would drop it too.
     const int boundChannels = s.spots && s.composesOnArrival() ? frames * s.textureChannels() : 0;
+    // A comet loop gathers the voxels the bound leaves (candidates) and composes them afterwards,
+    // frame by frame (composeLoopBlock), so each raw channel is read as one run.
     thread_local LoopStage stage;
     LoopStage* loop = mLoopBlocks.empty() ? nullptr : &stage;
-    if (loop) {
-        stage.kept.setOff();
-        stage.count = 0;
-        stage.values.resize(V * std::size_t(frames * loopValues()));
-    }
+    if (loop) stage.candidates = 0;
     // The bound of every voxel of the block at once, a channel's run of 512 at a time (per voxel, the
     // channels lie 2 KiB apart: 48 of them in a 24-frame loop).
     thread_local std::array<float, V> top;
@@ -165,32 +163,95 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
             widthT = float(s.widthInvert ? 1.0 - t : t);
         }
         const float roi = roiAt ? roiWeight(roiAt->at(off), s.roiRange[0], s.roiRange[1]) : 1.0f;
+        if (loop) {
+            const std::uint32_t j = stage.candidates++;
+            stage.off[j] = std::uint16_t(off);
+            stage.widthT[j] = widthT;
+            stage.roi[j] = roi;
+            continue;
+        }
         if (s.spots) {
-            if (!keepSpotVoxel(raw, widthT, roi, b, origin, off, loop)) continue;
+            if (!keepSpotVoxel(raw, widthT, roi, b, origin, off)) continue;
         } else {
             moments.add(frames > 1 ? rippleFrameValue(raw(0), raw(1), raw(2), raw(3), raw(4), mPhases[0])
                                    : raw(0));
         }
-        if (!mRawLeaves.empty()) {
-            for (int c = 0; c < R; ++c) mRawLeaves[std::size_t(c)].leaf(b, origin).setValueOn(off, raw(c));
-            if (mWidthLeaves.enabled()) mWidthLeaves.leaf(b, origin).setValueOn(off, widthT);
-            if (mRoiLeaves.enabled()) mRoiLeaves.leaf(b, origin).setValueOn(off, roi);
-        }
-        addStatic(b, origin, off, mDomain.coordOf(b * V + off), noise);
+        keepVoxel(bc, i, off, widthT, roi, noise);
     }
-    if (loop && stage.count > 0) keepLoopBlock(b, stage);
+    if (loop && stage.candidates > 0) {
+        composeLoopBlock(bc, i, stage);
+        // The kept voxels' other grids, in voxel order as a still's.
+        for (std::uint32_t j = 0; j < stage.candidates; ++j)
+            if (stage.shows[j]) keepVoxel(bc, i, stage.off[j], stage.widthT[j], stage.roi[j], noise);
+        keepLoopBlock(b, stage);
+    }
+}
+
+void Compositor::keepVoxel(const BrickChannels& bc, std::size_t i, openvdb::Index off, float widthT, float roi,
+                           const NoiseTexture* noise)
+{
+    constexpr std::size_t V = OutputDomain::kBlockVoxels;
+    const std::size_t b = bc.brick->blocks[i];
+    const openvdb::Coord origin = mDomain.blockOrigin(b);
+    if (!mRawLeaves.empty()) {
+        for (int c = 0; c < mSettings.rawChannels(); ++c)
+            mRawLeaves[std::size_t(c)].leaf(b, origin).setValueOn(off, bc.block(i, c)[off]);
+        if (mWidthLeaves.enabled()) mWidthLeaves.leaf(b, origin).setValueOn(off, widthT);
+        if (mRoiLeaves.enabled()) mRoiLeaves.leaf(b, origin).setValueOn(off, roi);
+    }
+    addStatic(b, origin, off, mDomain.coordOf(b * V + off), noise);
+}
+
+void Compositor::composeLoopBlock(const BrickChannels& bc, std::size_t i, LoopStage& stage) const
+{
+    // Every frame of every candidate composed once, frame-major ([frame][value][candidate]); a
+    // candidate is kept when line or halo shows in some frame, so every frame file has the same
+    // topology.
+    const int frames = mSettings.frames, K = mSettings.levels, series = mSettings.writeSeries ? K : 0;
+    const std::size_t nc = stage.candidates, per = std::size_t(loopValues());
+    stage.values.resize(std::size_t(frames) * per * nc);
+    std::fill_n(stage.shows.begin(), nc, std::uint8_t(0));
+    for (int f = 1; f <= frames; ++f) {
+        const FramePhase& ph = mPhases[std::size_t(f - 1)];
+        float* out = stage.values.data() + std::size_t(f - 1) * per * nc;
+        for (std::size_t j = 0; j < nc; ++j) {
+            const openvdb::Index off = stage.off[j];
+            auto raw = [&](int c) { return bc.block(i, c)[off]; };
+            const SpotVoxel sv = composeSpots([&](int c) { return loopFrameValue(mSettings, raw, c, f, ph); },
+                                              stage.widthT[j], stage.roi[j]);
+            stage.shows[j] |= std::uint8_t(showsIn(sv));
+            out[j] = sv.density;
+            out[nc + j] = sv.halo;
+            for (int k = 0; k < series; ++k) {
+                out[std::size_t(2 + k) * nc + j] = sv.lines[k];
+                out[std::size_t(2 + K + k) * nc + j] = sv.halos[k];
+            }
+        }
+    }
 }
 
 void Compositor::keepLoopBlock(std::size_t b, const LoopStage& stage)
 {
-    // Voxel-major staging → frame-major store: a frame is then one contiguous run per block.
-    const std::size_t n = stage.count, per = std::size_t(mSettings.frames * loopValues());
+    // The shown candidates' columns of every frame's values: frame-major, one contiguous run per
+    // frame and value.
+    const std::size_t nc = stage.candidates, rows = std::size_t(mSettings.frames * loopValues());
+    std::size_t n = 0;
     LoopBlock& lb = mLoopBlocks[b];
-    lb.kept = stage.kept;
-    lb.count = stage.count;
-    lb.values = std::make_unique_for_overwrite<float[]>(n * per);
-    for (std::size_t i = 0; i < n; ++i)
-        for (std::size_t k = 0; k < per; ++k) lb.values[k * n + i] = stage.values[i * per + k];
+    lb.kept.setOff();
+    for (std::size_t j = 0; j < nc; ++j)
+        if (stage.shows[j]) {
+            lb.kept.setOn(stage.off[j]);
+            ++n;
+        }
+    lb.count = std::uint32_t(n);
+    if (n == 0) return;
+    lb.values = std::make_unique_for_overwrite<float[]>(n * rows);
+    for (std::size_t r = 0; r < rows; ++r) {
+        const float* row = stage.values.data() + r * nc;
+        float* dst = lb.values.get() + r * n;
+        for (std::size_t j = 0; j < nc; ++j)
+            if (stage.shows[j]) *dst++ = row[j];
+    }
 }
 
 void Compositor::composeLoopLeaves(int f, LeafSet<openvdb::FloatGrid>& density, LeafSet<openvdb::FloatGrid>& halo,
@@ -223,10 +284,9 @@ void Compositor::composeLoopLeaves(int f, LeafSet<openvdb::FloatGrid>& density, 
 
 template<typename Raw>
 bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::size_t b, const openvdb::Coord& origin,
-                               openvdb::Index off, LoopStage* stage)
+                               openvdb::Index off)
 {
     const int frames = mSettings.frames;
-    auto showsIn = [](const SpotVoxel& sv) { return sv.density > kSparseEpsilon || sv.halo > kSparseEpsilon; };
     auto frameVoxel = [&](int f) {
         if (frames == 1) return composeSpots(raw, widthT, roi);
         const FramePhase& ph = mPhases[std::size_t(f - 1)];
@@ -234,27 +294,6 @@ bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::siz
     };
     // Kept when any frame of the loop shows line or halo here, so every frame file has the same
     // topology.
-    if (stage) {
-        // A comet loop: every frame composed once, into the stage's next slot, which is taken
-        // only when some frame shows.
-        const int K = mSettings.levels, series = mSettings.writeSeries ? K : 0, per = loopValues();
-        float* out = stage->values.data() + std::size_t(stage->count) * std::size_t(frames * per);
-        bool shows = false;
-        for (int f = 1; f <= frames; ++f, out += per) {
-            const SpotVoxel sv = frameVoxel(f);
-            shows = shows || showsIn(sv);
-            out[0] = sv.density;
-            out[1] = sv.halo;
-            for (int k = 0; k < series; ++k) {
-                out[2 + k] = sv.lines[k];
-                out[2 + K + k] = sv.halos[k];
-            }
-        }
-        if (!shows) return false;
-        stage->kept.setOn(off);
-        ++stage->count;
-        return true;
-    }
     const SpotVoxel first = frameVoxel(1);
     bool shows = showsIn(first);
     for (int f = 2; f <= frames && !shows; ++f) shows = showsIn(frameVoxel(f));

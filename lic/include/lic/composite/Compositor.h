@@ -125,22 +125,32 @@ private:
     template<typename Raw>
     SpotVoxel composeSpots(const Raw& raw, float widthT, float roi) const;
     void consumeBlock(const BrickChannels& bc, std::size_t i, Moments& moments);
-    /// A comet loop's kept voxels of the block being consumed: their offsets and every frame's
-    /// values, voxel-major (per voxel: frame 1's loopValues(), frame 2's, …).
+    /// A comet loop's block being consumed: the voxels its sparse bound leaves (candidates, in
+    /// voxel order) with their width and ROI, then every frame's values of each, frame-major
+    /// ([frame][value][candidate]), and whether line or halo shows in some frame.
     struct LoopStage
     {
-        openvdb::util::NodeMask<3> kept;
+        std::array<std::uint16_t, 512> off;
+        std::array<float, 512> widthT, roi;
+        std::array<std::uint8_t, 512> shows;
+        std::uint32_t candidates = 0;
         std::vector<float> values;
-        std::uint32_t count = 0;
     };
+    /// Line or halo shows (a kept voxel).
+    static bool showsIn(const SpotVoxel& sv) { return sv.density > kSparseEpsilon || sv.halo > kSparseEpsilon; }
     /// Whether a spot voxel is kept (line or halo shows in some frame); a still's final values are
-    /// stored here, a comet loop's staged in `stage`.
+    /// stored here.
     template<typename Raw>
     bool keepSpotVoxel(const Raw& raw, float widthT, float roi, std::size_t b, const openvdb::Coord& origin,
-                       openvdb::Index off, LoopStage* stage);
+                       openvdb::Index off);
+    /// A kept voxel's other grids: raw channels, width and ROI (if written), the static grids.
+    void keepVoxel(const BrickChannels& bc, std::size_t i, openvdb::Index off, float widthT, float roi,
+                   const NoiseTexture* noise);
+    /// A comet loop: every frame of the stage's candidates composed, a frame at a time.
+    void composeLoopBlock(const BrickChannels& bc, std::size_t i, LoopStage& stage) const;
     /// Values per voxel and frame of a comet loop: density, halo (+ each level's line and halo).
     int loopValues() const { return 2 + (mSettings.writeSeries ? 2 * mSettings.levels : 0); }
-    /// Store a consumed block's staged comet-loop values frame-major in mLoopBlocks[b].
+    /// Store the shown candidates' values of a consumed block in mLoopBlocks[b].
     void keepLoopBlock(std::size_t b, const LoopStage& stage);
     /// A comet loop's frame f leaves (density, halo, levels) from mLoopBlocks, on every core.
     void composeLoopLeaves(int f, LeafSet<openvdb::FloatGrid>& density, LeafSet<openvdb::FloatGrid>& halo,
