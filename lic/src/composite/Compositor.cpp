@@ -176,23 +176,21 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
             moments.add(frames > 1 ? rippleFrameValue(raw(0), raw(1), raw(2), raw(3), raw(4), mPhases[0])
                                    : raw(0));
         }
-        keepVoxel(bc, i, off, widthT, roi, noise);
+        keepVoxel(bc, i, b, origin, off, widthT, roi, noise);
     }
     if (loop && stage.candidates > 0) {
         composeLoopBlock(bc, i, stage);
         // The kept voxels' other grids, in voxel order as a still's.
         for (std::uint32_t j = 0; j < stage.candidates; ++j)
-            if (stage.shows[j]) keepVoxel(bc, i, stage.off[j], stage.widthT[j], stage.roi[j], noise);
+            if (stage.shows[j]) keepVoxel(bc, i, b, origin, stage.off[j], stage.widthT[j], stage.roi[j], noise);
         keepLoopBlock(b, stage);
     }
 }
 
-void Compositor::keepVoxel(const BrickChannels& bc, std::size_t i, openvdb::Index off, float widthT, float roi,
-                           const NoiseTexture* noise)
+void Compositor::keepVoxel(const BrickChannels& bc, std::size_t i, std::size_t b, const openvdb::Coord& origin,
+                           openvdb::Index off, float widthT, float roi, const NoiseTexture* noise)
 {
     constexpr std::size_t V = OutputDomain::kBlockVoxels;
-    const std::size_t b = bc.brick->blocks[i];
-    const openvdb::Coord origin = mDomain.blockOrigin(b);
     if (!mRawLeaves.empty()) {
         for (int c = 0; c < mSettings.rawChannels(); ++c)
             mRawLeaves[std::size_t(c)].leaf(b, origin).setValueOn(off, bc.block(i, c)[off]);

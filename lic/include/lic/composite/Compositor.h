@@ -144,8 +144,9 @@ private:
     bool keepSpotVoxel(const Raw& raw, float widthT, float roi, std::size_t b, const openvdb::Coord& origin,
                        openvdb::Index off);
     /// A kept voxel's other grids: raw channels, width and ROI (if written), the static grids.
-    void keepVoxel(const BrickChannels& bc, std::size_t i, openvdb::Index off, float widthT, float roi,
-                   const NoiseTexture* noise);
+    /// `b`, `origin`: the block of the brick's i-th block and its origin.
+    void keepVoxel(const BrickChannels& bc, std::size_t i, std::size_t b, const openvdb::Coord& origin,
+                   openvdb::Index off, float widthT, float roi, const NoiseTexture* noise);
     /// A comet loop: every frame of the stage's candidates composed, a frame at a time.
     void composeLoopBlock(const BrickChannels& bc, std::size_t i, LoopStage& stage) const;
     /// Values per voxel and frame of a comet loop: density, halo (+ each level's line and halo).

@@ -190,9 +190,10 @@ void FastEngine::brick(const VelocityField& field, const OutputDomain& domain, c
     }
 
     // Normalise into the brick's output blocks: every value of every block is written (0 where no
-    // line deposited or the voxel is inactive), so the buffer is not cleared first.
-    // It only grows (a vector's growth zero-fills, and bricks have different block counts).
-    if (out.size() < brick.blocks.size() * std::size_t(K) * V) out.resize(brick.blocks.size() * std::size_t(K) * V);
+    // line deposited or the voxel is inactive), so the buffer is not cleared first; it only grows
+    // (a vector's growth zero-fills, and bricks have different block counts).
+    const std::size_t outSize = brick.blocks.size() * std::size_t(K) * V;
+    if (out.size() < outSize) out.resize(outSize);
     for (std::size_t i = 0; i < brick.blocks.size(); ++i) {
         const std::uint32_t b = brick.blocks[i];
         const std::size_t base = bi.localBlock(domain.blockOrigin(b)) * V;
