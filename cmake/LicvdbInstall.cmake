@@ -108,7 +108,7 @@ colour by scalars, looping animations. It includes a reference halo raycaster
 (licvdb render) and the Blender add-on zips in /usr/share/licvdb/blender.")
 # dpkg-shlibdeps finds every shared library the binaries and the image module link, with versions (libopenvdb10.0,
 # libtbb12, libopenimageio2.4, libopencolorio2.1, libimath-3-1-29, libblosc1, libssl3, zlib1g,
-# libopenmpi3, libvtk9.1 with VTK, libstdc++6, libc6: scripts/test-install checks them). licvdb runs nothing else
+# libopenmpi3, libvtk9.1 with VTK, libjemalloc2 with jemalloc, libstdc++6, libc6: scripts/test-install checks them). licvdb runs nothing else
 # except mpirun for distributed bakes (openmpi-bin, suggested) and Blender for the add-on.
 set(CPACK_DEBIAN_RUNTIME_PACKAGE_SHLIBDEPS ON)
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)

@@ -656,6 +656,14 @@ TEST_F(CliTest, InfoHelpVersion)
     const RunResult vs = run({"version"});
     EXPECT_EQ(vs.code, 0) << vs.describe();
     EXPECT_NE(vs.out.find(version), std::string::npos) << vs.describe();
+    // The heap allocator, as the build chose it: jemalloc with transparent huge pages read back
+    // from jemalloc itself (malloc_conf took effect), or the C library's malloc.
+#ifdef LICVDB_JEMALLOC
+    EXPECT_NE(vs.out.find("allocator: jemalloc 5"), std::string::npos) << vs.describe();
+    EXPECT_NE(vs.out.find("transparent huge pages: always"), std::string::npos) << vs.describe();
+#else
+    EXPECT_NE(vs.out.find("allocator: the C library's malloc"), std::string::npos) << vs.describe();
+#endif
 }
 
 // ---- 6. determinism across thread counts -----------------------------------------------------

@@ -54,7 +54,8 @@ struct AbcBricks
     BrickLayout layout{domain, 16};
 };
 
-bool sameBits(const std::vector<float>& a, const std::vector<float>& b)
+template<typename A>
+bool sameBits(const std::vector<float, A>& a, const std::vector<float>& b)
 {
     return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
 }
@@ -101,7 +102,7 @@ TEST(Bricks, ABricksResultDependsOnlyOnTheBrick)
     for (std::size_t i = layout.size(); i-- > 0;) {
         NoiseBrickSource fresh(9, NoiseFilter::Binomial, ghostMargin(s));
         FastEngine::Scratch scratch;
-        std::vector<float> out;
+        ScratchVector<float> out;
         LicStats st;
         FastEngine::brick<NoiseTexture, false>(field, domain, layout[i], fresh(layout[i]), s, scratch, out, st,
                                                nullProgress());

@@ -1,5 +1,6 @@
 // `licvdb help [CMD]` and `licvdb version`.
 #include "Command.h"
+#include "Allocator.h"
 
 #include <lic/util/Error.h>
 
@@ -41,7 +42,7 @@ public:
 
     int run(Context&) override
     {
-        std::cout << "licvdb " << LICVDB_VERSION << "\n";
+        std::cout << "licvdb " << LICVDB_VERSION << "\n" << "allocator: " << allocatorDescription() << "\n";
         return 0;
     }
 };

@@ -22,6 +22,7 @@
 #include "lic/field/Bricks.h"
 #include "lic/field/Field.h"
 #include "lic/field/OutputDomain.h"
+#include "lic/util/Buffer.h"
 #include "lic/util/Error.h"
 #include "lic/util/Progress.h"
 
@@ -47,7 +48,7 @@ struct FastScratch
 {
     BrickIndex index;                // the brick's local voxel numbering
     std::vector<float> weight;       // per local voxel: Σ deposit weights
-    std::vector<float> sum;          // per local voxel × K: Σ weight · value (a block's set when ready)
+    ScratchVector<float> sum;        // per local voxel × K: Σ weight · value (a block's set when ready)
     std::vector<std::uint8_t> sumReady; // per local block: its sums zeroed (at its first deposit)
     std::vector<std::uint8_t> hits;  // per local voxel: deposits, saturating at 255
     std::vector<openvdb::Vec3d> pts; // the RK45 tracer's world positions
@@ -151,7 +152,7 @@ struct FastEngine
     /// averages at points within half a voxel of the centre elsewhere.
     template<typename Texture, bool Ripple>
     static void brick(const VelocityField& field, const OutputDomain& domain, const Brick& brick,
-                      const Texture& texture, const LicSettings& settings, Scratch& sc, std::vector<float>& out,
+                      const Texture& texture, const LicSettings& settings, Scratch& sc, ScratchVector<float>& out,
                       LicStats& stats, Progress& progress);
 };
 
@@ -159,7 +160,7 @@ struct FastEngine
 
 template<typename Texture, bool Ripple>
 void FastEngine::brick(const VelocityField& field, const OutputDomain& domain, const Brick& brick,
-                       const Texture& texture, const LicSettings& settings, Scratch& sc, std::vector<float>& out,
+                       const Texture& texture, const LicSettings& settings, Scratch& sc, ScratchVector<float>& out,
                        LicStats& stats, Progress&)
 {
     constexpr std::size_t V = OutputDomain::kBlockVoxels;
@@ -191,7 +192,7 @@ void FastEngine::brick(const VelocityField& field, const OutputDomain& domain, c
 
     // Normalise into the brick's output blocks: every value of every block is written (0 where no
     // line deposited or the voxel is inactive), so the buffer is not cleared first; it only grows
-    // (a vector's growth zero-fills, and bricks have different block counts).
+    // (bricks have different block counts; its growth leaves the new floats unset).
     const std::size_t outSize = brick.blocks.size() * std::size_t(K) * V;
     if (out.size() < outSize) out.resize(outSize);
     for (std::size_t i = 0; i < brick.blocks.size(); ++i) {

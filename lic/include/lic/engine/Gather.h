@@ -50,7 +50,7 @@ LicStats gatherBricks(const VelocityField& field, const OutputDomain& domain, co
     struct Worker
     {
         typename Engine::Scratch scratch;
-        std::vector<float> out;
+        ScratchVector<float> out;
         LicStats stats;
     };
     const auto start = std::chrono::steady_clock::now();

@@ -9,6 +9,7 @@
 #include "lic/field/Bricks.h"
 #include "lic/field/Field.h"
 #include "lic/field/OutputDomain.h"
+#include "lic/util/Buffer.h"
 #include "lic/util/Parallel.h"
 #include "lic/util/Progress.h"
 
@@ -41,7 +42,7 @@ struct NaiveEngine
     /// order, K runs of 512 floats (K = C, or 3C + 2 with Ripple), as FastEngine::brick() does.
     template<typename Texture, bool Ripple>
     static void brick(const VelocityField& field, const OutputDomain& domain, const Brick& brick,
-                      const Texture& texture, const LicSettings& settings, Scratch&, std::vector<float>& out,
+                      const Texture& texture, const LicSettings& settings, Scratch&, ScratchVector<float>& out,
                       LicStats& stats, Progress& progress);
 
 private:
@@ -54,7 +55,7 @@ private:
 
 template<typename Texture, bool Ripple>
 void NaiveEngine::brick(const VelocityField& field, const OutputDomain& domain, const Brick& brick,
-                        const Texture& texture, const LicSettings& settings, Scratch&, std::vector<float>& out,
+                        const Texture& texture, const LicSettings& settings, Scratch&, ScratchVector<float>& out,
                         LicStats& stats, Progress& progress)
 {
     constexpr int C = Texture::kChannels;
