@@ -110,16 +110,35 @@ StopReason traceStreamline(const VelocityField& f, const openvdb::Vec3d& seed, d
 }
 
 namespace detail {
+// Vec3d arithmetic of the index-space tracer, always inlined. In the long lockstep loop below GCC
+// stops inlining OpenVDB's Vec3 operator+ (and calls it a dozen times per step pair); these
+// compute exactly what the operator expressions they replace compute, in the same order.
+/// x + k · s
+[[gnu::always_inline]] inline openvdb::Vec3d stepAlong(const openvdb::Vec3d& x, const openvdb::Vec3d& k, double s)
+{
+    return openvdb::Vec3d(x[0] + k[0] * s, x[1] + k[1] * s, x[2] + k[2] * s);
+}
+/// x + (k1 + 2 (k2 + k3) + k4) · s: the RK4 update
+[[gnu::always_inline]] inline openvdb::Vec3d rk4Update(const openvdb::Vec3d& x, const openvdb::Vec3d& k1, const openvdb::Vec3d& k2,
+                                                      const openvdb::Vec3d& k3, const openvdb::Vec3d& k4, double s)
+{
+    openvdb::Vec3d r;
+    for (int a = 0; a < 3; ++a) r[a] = x[a] + (k1[a] + 2.0 * (k2[a] + k3[a]) + k4[a]) * s;
+    return r;
+}
+} // namespace detail
+
+namespace detail {
 /// One RK4 step of world arc length h in the field's INDEX space (directions from
 /// VelocityField::directionIndex): the world-space step mapped through the affine transform.
 inline bool rk4StepIndex(const VelocityField& f, const openvdb::Vec3d& x, const openvdb::Vec3d& k1, double h,
                          double sign, double minSpeed, openvdb::Vec3d& out)
 {
     openvdb::Vec3d k2, k3, k4;
-    if (!f.directionIndex(x + k1 * (0.5 * h), sign, minSpeed, k2)) return false;
-    if (!f.directionIndex(x + k2 * (0.5 * h), sign, minSpeed, k3)) return false;
-    if (!f.directionIndex(x + k3 * h, sign, minSpeed, k4)) return false;
-    out = x + (k1 + 2.0 * (k2 + k3) + k4) * (h / 6.0);
+    if (!f.directionIndex(stepAlong(x, k1, 0.5 * h), sign, minSpeed, k2)) return false;
+    if (!f.directionIndex(stepAlong(x, k2, 0.5 * h), sign, minSpeed, k3)) return false;
+    if (!f.directionIndex(stepAlong(x, k3, h), sign, minSpeed, k4)) return false;
+    out = rk4Update(x, k1, k2, k3, k4, h / 6.0);
     return f.containsIndex(out);
 }
 } // namespace detail
@@ -143,8 +162,9 @@ bool emitLongStep(IndexSide& s, int m, double H, const openvdb::Vec3d& x1, const
     const openvdb::Vec3d t0 = s.k1 * H, t1 = d1 * H;
     for (int j = 1; j < m; ++j) {
         const double t = double(j) / double(m), t2 = t * t, t3 = t2 * t;
-        const openvdb::Vec3d p = (2 * t3 - 3 * t2 + 1) * s.x + (t3 - 2 * t2 + t) * t0 + (3 * t2 - 2 * t3) * x1 +
-                                 (t3 - t2) * t1;
+        const double h00 = 2 * t3 - 3 * t2 + 1, h10 = t3 - 2 * t2 + t, h01 = 3 * t2 - 2 * t3, h11 = t3 - t2;
+        openvdb::Vec3d p; // h00 x + h10 t0 + h01 x1 + h11 t1, summed left to right
+        for (int a = 0; a < 3; ++a) p[a] = h00 * s.x[a] + h10 * t0[a] + h01 * x1[a] + h11 * t1[a];
         if (!on(p)) return false;
     }
     if (!on(x1)) return false;
@@ -241,14 +261,15 @@ std::pair<StopReason, StopReason> traceIndexPair(const VelocityField& f, const o
         // Both sides take a long step, stage by stage.
         const double Ha = h * double(ma), Hb = h * double(mb);
         Vec3d a2(0.0), a3(0.0), a4(0.0), b2(0.0), b3(0.0), b4(0.0), a1n(0.0), b1n(0.0), xa(0.0), xb(0.0);
-        bool okA = f.directionIndex(A.x + A.k1 * (0.5 * Ha), A.sign, s.minSpeed, a2);
-        bool okB = f.directionIndex(B.x + B.k1 * (0.5 * Hb), B.sign, s.minSpeed, b2);
-        okA = okA && f.directionIndex(A.x + a2 * (0.5 * Ha), A.sign, s.minSpeed, a3);
-        okB = okB && f.directionIndex(B.x + b2 * (0.5 * Hb), B.sign, s.minSpeed, b3);
-        okA = okA && f.directionIndex(A.x + a3 * Ha, A.sign, s.minSpeed, a4);
-        okB = okB && f.directionIndex(B.x + b3 * Hb, B.sign, s.minSpeed, b4);
-        if (okA) xa = A.x + (A.k1 + 2.0 * (a2 + a3) + a4) * (Ha / 6.0);
-        if (okB) xb = B.x + (B.k1 + 2.0 * (b2 + b3) + b4) * (Hb / 6.0);
+        using detail::stepAlong;
+        bool okA = f.directionIndex(stepAlong(A.x, A.k1, 0.5 * Ha), A.sign, s.minSpeed, a2);
+        bool okB = f.directionIndex(stepAlong(B.x, B.k1, 0.5 * Hb), B.sign, s.minSpeed, b2);
+        okA = okA && f.directionIndex(stepAlong(A.x, a2, 0.5 * Ha), A.sign, s.minSpeed, a3);
+        okB = okB && f.directionIndex(stepAlong(B.x, b2, 0.5 * Hb), B.sign, s.minSpeed, b3);
+        okA = okA && f.directionIndex(stepAlong(A.x, a3, Ha), A.sign, s.minSpeed, a4);
+        okB = okB && f.directionIndex(stepAlong(B.x, b3, Hb), B.sign, s.minSpeed, b4);
+        if (okA) xa = detail::rk4Update(A.x, A.k1, a2, a3, a4, Ha / 6.0);
+        if (okB) xb = detail::rk4Update(B.x, B.k1, b2, b3, b4, Hb / 6.0);
         okA = okA && f.containsIndex(xa) && f.directionIndex(xa, A.sign, s.minSpeed, a1n);
         okB = okB && f.containsIndex(xb) && f.directionIndex(xb, B.sign, s.minSpeed, b1n);
         if (okA) {

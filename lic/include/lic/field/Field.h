@@ -93,7 +93,7 @@ public:
 
     /// True if a world position lies inside the domain (see class comment).
     bool contains(const openvdb::Vec3d& world) const { return containsIndex(mMap.toIndex(world)); }
-    bool containsIndex(const openvdb::Vec3d& idx) const
+    [[gnu::always_inline]] bool containsIndex(const openvdb::Vec3d& idx) const
     {
         return idx[0] >= mLo[0] && idx[1] >= mLo[1] && idx[2] >= mLo[2] && idx[0] <= mHi[0] &&
                idx[1] <= mHi[1] && idx[2] <= mHi[2];
@@ -129,7 +129,7 @@ public:
     {
         if (!containsIndex(idx)) return false;
         const openvdb::Vec3d v = mStaggered ? sampleStaggered(idx) : sampleCentred(idx);
-        const double len2 = v.lengthSqr();
+        const double len2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]; // Vec3::lengthSqr, always inlined
         if (!(len2 > minSpeed * minSpeed) || !std::isfinite(len2)) return false;
         const double s = sign / std::sqrt(len2);
         const openvdb::Mat4d& m = mMap.worldToIndex; // row-vector layout: d_j = Σ_i v_i m[i][j]
@@ -173,18 +173,33 @@ private:
     openvdb::Index64 mActiveVoxels = 0;
 };
 
+namespace detail {
+/// std::clamp for ints, always inlined: in the tracer's long lockstep loop GCC stops inlining
+/// std::clamp (it takes references) and calls it 35 times per step pair.
+[[gnu::always_inline]] inline int clampIndex(int v, int lo, int hi) { return v < lo ? lo : (hi < v ? hi : v); }
+/// std::floor for |x| < 2³¹ (as int and as double), without a call: x86-64's baseline has no
+/// rounding instruction, so std::floor is a call into libm.
+[[gnu::always_inline]] inline int floorIndex(double x)
+{
+    const int i = int(x);
+    return double(i) > x ? i - 1 : i;
+}
+} // namespace detail
+
 [[gnu::always_inline]] inline openvdb::Vec3d VelocityField::sampleCentred(const openvdb::Vec3d& idx) const
 {
-    const double x = std::floor(idx[0]), y = std::floor(idx[1]), z = std::floor(idx[2]);
-    const double fx = idx[0] - x, fy = idx[1] - y, fz = idx[2] - z;
+    // idx lies in the active box (callers check containsIndex, or clamp), so floor fits an int.
+    const int xi = detail::floorIndex(idx[0]), yi = detail::floorIndex(idx[1]), zi = detail::floorIndex(idx[2]);
+    const double fx = idx[0] - double(xi), fy = idx[1] - double(yi), fz = idx[2] - double(zi);
     // Clamp each axis' two lattice indices once (as at() would per corner), then address the
     // eight corners by sums of per-axis offsets.
-    const int i = int(x) - mDenseBox.min()[0], j = int(y) - mDenseBox.min()[1], k = int(z) - mDenseBox.min()[2];
+    const int i = xi - mDenseBox.min()[0], j = yi - mDenseBox.min()[1], k = zi - mDenseBox.min()[2];
     const int nx = int(mDim[0]) - 1, ny = int(mDim[1]) - 1, nz = int(mDim[2]) - 1;
     const std::size_t sx = mDim[1] * mDim[2], sy = mDim[2];
-    const std::size_t x0 = std::size_t(std::clamp(i, 0, nx)) * sx, x1 = std::size_t(std::clamp(i + 1, 0, nx)) * sx;
-    const std::size_t y0 = std::size_t(std::clamp(j, 0, ny)) * sy, y1 = std::size_t(std::clamp(j + 1, 0, ny)) * sy;
-    const std::size_t z0 = std::size_t(std::clamp(k, 0, nz)), z1 = std::size_t(std::clamp(k + 1, 0, nz));
+    using detail::clampIndex;
+    const std::size_t x0 = std::size_t(clampIndex(i, 0, nx)) * sx, x1 = std::size_t(clampIndex(i + 1, 0, nx)) * sx;
+    const std::size_t y0 = std::size_t(clampIndex(j, 0, ny)) * sy, y1 = std::size_t(clampIndex(j + 1, 0, ny)) * sy;
+    const std::size_t z0 = std::size_t(clampIndex(k, 0, nz)), z1 = std::size_t(clampIndex(k + 1, 0, nz));
     const Float4* d = mData;
     const float tx = float(fx), ty = float(fy), tz = float(fz);
     const Float4 c00 = d[x0 + y0 + z0] + (d[x0 + y0 + z1] - d[x0 + y0 + z0]) * tz;
