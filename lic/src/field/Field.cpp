@@ -165,9 +165,8 @@ bool VelocityField::sampleGradient(const openvdb::Vec3d& world, openvdb::Vec3d& 
     for (int c = 0; c < 3; ++c) {
         openvdb::Vec3d p = idx;
         if (mStaggered) p[c] += 0.5;
-        const double x = std::floor(p[0]), y = std::floor(p[1]), z = std::floor(p[2]);
-        const double fx = p[0] - x, fy = p[1] - y, fz = p[2] - z;
-        const int i = int(x), j = int(y), k = int(z);
+        const int i = detail::floorIndex(p[0]), j = detail::floorIndex(p[1]), k = detail::floorIndex(p[2]);
+        const double fx = p[0] - double(i), fy = p[1] - double(j), fz = p[2] - double(k);
         double n[2][2][2];
         for (int a = 0; a < 2; ++a)
             for (int b = 0; b < 2; ++b)
@@ -196,9 +195,8 @@ openvdb::Vec3d VelocityField::sampleStaggered(const openvdb::Vec3d& idx) const
     for (int c = 0; c < 3; ++c) {
         openvdb::Vec3d p = idx;
         p[c] += 0.5;
-        const double x = std::floor(p[0]), y = std::floor(p[1]), z = std::floor(p[2]);
-        const double fx = p[0] - x, fy = p[1] - y, fz = p[2] - z;
-        const int i = int(x), j = int(y), k = int(z);
+        const int i = detail::floorIndex(p[0]), j = detail::floorIndex(p[1]), k = detail::floorIndex(p[2]);
+        const double fx = p[0] - double(i), fy = p[1] - double(j), fz = p[2] - double(k);
         auto v = [&](int a, int b, int d) { return double(at(i + a, j + b, k + d)[c]); };
         const double c00 = v(0, 0, 0) + (v(0, 0, 1) - v(0, 0, 0)) * fz;
         const double c01 = v(0, 1, 0) + (v(0, 1, 1) - v(0, 1, 0)) * fz;

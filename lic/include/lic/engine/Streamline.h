@@ -126,9 +126,7 @@ namespace detail {
     for (int a = 0; a < 3; ++a) r[a] = x[a] + (k1[a] + 2.0 * (k2[a] + k3[a]) + k4[a]) * s;
     return r;
 }
-} // namespace detail
 
-namespace detail {
 /// One RK4 step of world arc length h in the field's INDEX space (directions from
 /// VelocityField::directionIndex): the world-space step mapped through the affine transform.
 inline bool rk4StepIndex(const VelocityField& f, const openvdb::Vec3d& x, const openvdb::Vec3d& k1, double h,
@@ -141,9 +139,7 @@ inline bool rk4StepIndex(const VelocityField& f, const openvdb::Vec3d& x, const 
     out = rk4Update(x, k1, k2, k3, k4, h / 6.0);
     return f.containsIndex(out);
 }
-} // namespace detail
 
-namespace detail {
 /// One side of a line being traced in index space (see traceIndexPair).
 struct IndexSide
 {

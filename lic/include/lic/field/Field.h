@@ -49,6 +49,19 @@ struct FieldExtent
     openvdb::CoordBBox region;
 };
 
+namespace detail {
+/// std::clamp for ints, always inlined: in the tracer's long lockstep loop GCC stops inlining
+/// std::clamp (it takes references) and calls it 35 times per step pair.
+[[gnu::always_inline]] inline int clampIndex(int v, int lo, int hi) { return v < lo ? lo : (hi < v ? hi : v); }
+/// std::floor for |x| < 2³¹ (as int and as double), without a call: x86-64's baseline has no
+/// rounding instruction, so std::floor is a call into libm.
+[[gnu::always_inline]] inline int floorIndex(double x)
+{
+    const int i = int(x);
+    return double(i) > x ? i - 1 : i;
+}
+} // namespace detail
+
 /// The velocity field of a bake: a Vec3 grid whose values are world-space vectors, placed in the
 /// world by the grid's transform.
 ///
@@ -149,9 +162,9 @@ private:
     /// Value at integer coordinate, clamped to the bounding box (of the part held).
     openvdb::Vec3s at(int i, int j, int k) const
     {
-        i = std::clamp(i, mDenseBox.min()[0], mDenseBox.max()[0]) - mDenseBox.min()[0];
-        j = std::clamp(j, mDenseBox.min()[1], mDenseBox.max()[1]) - mDenseBox.min()[1];
-        k = std::clamp(k, mDenseBox.min()[2], mDenseBox.max()[2]) - mDenseBox.min()[2];
+        i = detail::clampIndex(i, mDenseBox.min()[0], mDenseBox.max()[0]) - mDenseBox.min()[0];
+        j = detail::clampIndex(j, mDenseBox.min()[1], mDenseBox.max()[1]) - mDenseBox.min()[1];
+        k = detail::clampIndex(k, mDenseBox.min()[2], mDenseBox.max()[2]) - mDenseBox.min()[2];
         const Float4& v = mData[(size_t(i) * mDim[1] + size_t(j)) * mDim[2] + size_t(k)];
         return openvdb::Vec3s(v[0], v[1], v[2]);
     }
@@ -173,18 +186,6 @@ private:
     openvdb::Index64 mActiveVoxels = 0;
 };
 
-namespace detail {
-/// std::clamp for ints, always inlined: in the tracer's long lockstep loop GCC stops inlining
-/// std::clamp (it takes references) and calls it 35 times per step pair.
-[[gnu::always_inline]] inline int clampIndex(int v, int lo, int hi) { return v < lo ? lo : (hi < v ? hi : v); }
-/// std::floor for |x| < 2³¹ (as int and as double), without a call: x86-64's baseline has no
-/// rounding instruction, so std::floor is a call into libm.
-[[gnu::always_inline]] inline int floorIndex(double x)
-{
-    const int i = int(x);
-    return double(i) > x ? i - 1 : i;
-}
-} // namespace detail
 
 [[gnu::always_inline]] inline openvdb::Vec3d VelocityField::sampleCentred(const openvdb::Vec3d& idx) const
 {
