@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iterator>
 #include <string>
 
 #include <unistd.h>
@@ -474,6 +475,96 @@ TEST_F(VdbIOTest, WrittenGridsHaveNoActiveTilesAndInputIsUntouched)
     EXPECT_EQ(velocity->activeVoxelCount(), 8u * 8u * 8u);
     EXPECT_EQ(velocity->tree().leafCount(), 1u);
     EXPECT_EQ(velocity->tree().getValue(openvdb::Coord(130, 5, 3)), openvdb::Vec3s(1.0f, 0.0f, 0.0f));
+}
+
+namespace {
+
+std::string fileBytes(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+/// A grid of `leaves` leaves of noisy values (some voxels inactive, so the mask compression has
+/// work), with `name`, stored as half or not.
+template<typename GridT>
+typename GridT::Ptr noisyGrid(const std::string& name, int leaves, bool half, unsigned seed)
+{
+    auto grid = GridT::create();
+    grid->setName(name);
+    grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+    grid->setSaveFloatAsHalf(half);
+    grid->insertMeta("lic_note", openvdb::StringMetadata(name + " metadata"));
+    auto acc = grid->getAccessor();
+    unsigned h = seed;
+    for (int l = 0; l < leaves; ++l)
+        for (int v = 0; v < 512; ++v) {
+            h = h * 1664525u + 1013904223u;
+            if ((h >> 28) == 0) continue; // ~1/16 stay inactive
+            const openvdb::Coord ijk(8 * (l % 7) + (v >> 6), 8 * (l / 7) + ((v >> 3) & 7), (v & 7) - 20);
+            acc.setValue(ijk, typename GridT::ValueType(float(h >> 8) / 16777216.0f));
+        }
+    return grid;
+}
+
+} // namespace
+
+// detail::writeVdbFile makes the grids' records side by side; the file must be what
+// io::File::write makes, byte for byte, but for the random UUID in the header, and read back.
+TEST_F(VdbIOTest, SideBySideWriteGivesTheBytesOfOpenVdbsWriter)
+{
+    openvdb::GridCPtrVec grids{noisyGrid<openvdb::FloatGrid>("density", 40, false, 1),
+                               noisyGrid<openvdb::FloatGrid>("halo", 25, true, 2),
+                               noisyGrid<openvdb::Vec3SGrid>("velocity", 9, false, 3),
+                               noisyGrid<openvdb::FloatGrid>("width", 1, false, 4)};
+    openvdb::MetaMap meta;
+    meta.insertMeta("creator", openvdb::StringMetadata("licvdb test"));
+    for (std::size_t n : {std::size_t(1), std::size_t(2), std::size_t(4)}) {
+        const openvdb::GridCPtrVec some(grids.begin(), grids.begin() + std::ptrdiff_t(n));
+        const std::string ours = file("ours" + std::to_string(n) + ".vdb"), ref = file("ref" + std::to_string(n) + ".vdb");
+        vdbexport::detail::writeVdbFile(ours, some, meta);
+        openvdb::io::File(ref).write(some, meta);
+        const std::string a = fileBytes(ours), b = fileBytes(ref);
+        ASSERT_EQ(a.size(), b.size()) << n << " grids";
+        // The header: magic (8), file version (4), library version (8), offsets flag (1), then
+        // the UUID as 36 characters.
+        constexpr std::size_t kUuid = 21, kUuidEnd = 21 + 36;
+        ASSERT_GT(a.size(), kUuidEnd);
+        EXPECT_NE(a.substr(kUuid, 36), b.substr(kUuid, 36)) << "two writes gave the same random UUID";
+        EXPECT_EQ(a.substr(0, kUuid), b.substr(0, kUuid)) << n << " grids";
+        EXPECT_TRUE(a.substr(kUuidEnd) == b.substr(kUuidEnd)) << n << " grids: the files differ after the header";
+
+        openvdb::io::File in(ours);
+        in.open(/*delayLoad=*/false);
+        const auto back = in.getGrids();
+        ASSERT_EQ(back->size(), n);
+        for (std::size_t i = 0; i < n; ++i) {
+            EXPECT_EQ((*back)[i]->getName(), some[i]->getName());
+            EXPECT_EQ((*back)[i]->activeVoxelCount(), some[i]->activeVoxelCount());
+        }
+        // Random access by name uses the descriptors' stream positions: the last grid's must point
+        // at its record.
+        const auto last = openvdb::gridPtrCast<openvdb::FloatGrid>(in.readGrid(some[n - 1]->getName()));
+        in.close();
+        ASSERT_TRUE(last) << n << " grids"; // (the last of 1, 2 and 4 is a float grid)
+        const auto src = openvdb::gridConstPtrCast<openvdb::FloatGrid>(some[n - 1]);
+        for (auto it = src->cbeginValueOn(); it; ++it)
+            ASSERT_EQ(last->tree().getValue(it.getCoord()), src->saveFloatAsHalf() ? float(openvdb::math::half(*it)) : *it);
+    }
+}
+
+// Names Archive would change (a repeated name) take io::File::write's path: still a readable
+// file with both grids.
+TEST_F(VdbIOTest, SideBySideWriteFallsBackForRepeatedNames)
+{
+    openvdb::GridCPtrVec grids{noisyGrid<openvdb::FloatGrid>("density", 3, false, 1),
+                               noisyGrid<openvdb::FloatGrid>("density", 2, false, 2)};
+    const std::string ours = file("ours.vdb"), ref = file("ref.vdb");
+    vdbexport::detail::writeVdbFile(ours, grids, {});
+    openvdb::io::File(ref).write(grids, {});
+    const std::string a = fileBytes(ours), b = fileBytes(ref);
+    ASSERT_EQ(a.size(), b.size());
+    EXPECT_TRUE(a.substr(57) == b.substr(57));
 }
 
 TEST_F(VdbIOTest, WriteTextAtomicWritesAndReplaces)

@@ -693,11 +693,7 @@ OutputSet::Pending OutputSet::writeVdb(const std::string& path, openvdb::GridPtr
             copy->apply<VoxelizableGridTypes>([](auto& grid) { grid.tree().voxelizeActiveTiles(); });
             grids[i] = copy;
         }
-        {
-            openvdb::io::File file(tmp);
-            file.write(grids, fileMetadata);
-            file.close();
-        }
+        detail::writeVdbFile(tmp, openvdb::GridCPtrVec(grids.begin(), grids.end()), fileMetadata);
         // io::File does not report stream errors after opening (e.g. a full disk): check the
         // structure of what was written and read the headers back.
         try {

@@ -137,6 +137,15 @@ std::string prepareAtomicWrite(const std::string& path);
 /// O_TMPFILE cannot remove its named temporary; the next write of the same path does.
 void removeStaleTemporaries(const std::string& path);
 
+/// Write `grids` and the file metadata to `path` as openvdb::io::File::write does, byte for byte
+/// but for the file's random UUID, with the grids' records made side by side, one task per grid
+/// (src/io/VdbWrite.cpp). Falls back to io::File::write for a single grid, names Archive would
+/// change (empty or repeated), trees shared by grids (instances), and when the grids after the
+/// first hold over 256 MiB in memory (their records are held in memory until appended).
+/// Errors as io::File::write's (openvdb exceptions, lic::Error); a short write is the caller's
+/// to find (OutputSet::writeVdb checks the structure written).
+void writeVdbFile(const std::string& path, const openvdb::GridCPtrVec& grids, const openvdb::MetaMap& fileMetadata);
+
 /// Flush `tmp` to disk, then rename it over `path`. Removes `tmp` and throws lic::Error on failure.
 void commitAtomicWrite(const std::string& tmp, const std::string& path);
 
