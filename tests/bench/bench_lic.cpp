@@ -15,6 +15,8 @@
 #include "lic/field/Presets.h"
 #include "lic/texture/Noise.h"
 
+#include "Allocator.h"
+
 #include <benchmark/benchmark.h>
 
 #include <openvdb/tools/Interpolation.h>
@@ -248,4 +250,14 @@ BENCHMARK_CAPTURE(bake, fast_L20_stride2, EngineType::Fast, 20.0, 0, 2)->Unit(be
 BENCHMARK_CAPTURE(bake, fast_L40_brick64, EngineType::Fast, 40.0, 64)->Unit(benchmark::kSecond)->Iterations(3)->UseRealTime();
 BENCHMARK_CAPTURE(bake, fast_L40_brick128, EngineType::Fast, 40.0, 128)->Unit(benchmark::kSecond)->Iterations(3)->UseRealTime();
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv)
+{
+    benchmark::Initialize(&argc, argv);
+    if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+    // The heap matters to the fast engine's larger bricks (docs/performance.md, 2026-12-05): say
+    // which one these figures were taken with.
+    benchmark::AddCustomContext("allocator", vdbexport::cli::allocatorDescription());
+    benchmark::RunSpecifiedBenchmarks();
+    benchmark::Shutdown();
+    return 0;
+}
