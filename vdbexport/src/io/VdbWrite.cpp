@@ -19,12 +19,14 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <streambuf>
 
 namespace vdbexport::detail {
 
@@ -33,6 +35,50 @@ namespace {
 /// Grids whose records are held in memory at once, at most (in-memory size): a bigger file is
 /// written by io::File::write, one grid at a time, without the extra copy.
 constexpr openvdb::Index64 kSideBySideBytes = openvdb::Index64(256) << 20;
+
+/// A grid's record in memory: an output stream buffer over a string, reserved up front (the grid's
+/// in-memory size bounds its compressed record, so the string does not grow by doubling and only
+/// the bytes written are touched) and seekable within what is written (writeGrid goes back to
+/// rewrite the descriptor's positions).
+class RecordBuffer : public std::streambuf
+{
+public:
+    explicit RecordBuffer(std::size_t reserve) { mBytes.reserve(reserve); }
+    std::string take() { return std::move(mBytes); }
+
+protected:
+    std::streamsize xsputn(const char* s, std::streamsize n) override
+    {
+        const std::size_t count = std::size_t(n), over = std::min(count, mBytes.size() - mPos);
+        mBytes.replace(mPos, over, s, over);
+        mBytes.append(s + over, count - over);
+        mPos += count;
+        return n;
+    }
+    int_type overflow(int_type c) override
+    {
+        if (traits_type::eq_int_type(c, traits_type::eof())) return traits_type::not_eof(c);
+        const char ch = traits_type::to_char_type(c);
+        xsputn(&ch, 1);
+        return c;
+    }
+    pos_type seekoff(off_type off, std::ios_base::seekdir dir, std::ios_base::openmode which) override
+    {
+        const off_type base = dir == std::ios_base::beg ? 0 : dir == std::ios_base::cur ? off_type(mPos) : off_type(mBytes.size());
+        const off_type to = base + off;
+        if (!(which & std::ios_base::out) || to < 0 || to > off_type(mBytes.size())) return pos_type(off_type(-1));
+        mPos = std::size_t(to);
+        return pos_type(to);
+    }
+    pos_type seekpos(pos_type pos, std::ios_base::openmode which) override
+    {
+        return seekoff(off_type(pos), std::ios_base::beg, which);
+    }
+
+private:
+    std::string mBytes;
+    std::size_t mPos = 0; ///< where the next byte goes (≤ size: writeGrid seeks back, then to the end)
+};
 
 /// io::Archive's writer with the grids' records made side by side (see the file comment).
 class SideBySideArchive : public openvdb::io::Archive
@@ -80,7 +126,8 @@ public:
                 writeGrid(descriptors[0], grids[0], file, /*seekable=*/true);
                 return;
             }
-            std::ostringstream os(std::ios::out | std::ios::binary);
+            RecordBuffer buffer(std::size_t(grids[i]->memUsage()) + (std::size_t(1) << 16));
+            std::ostream os(&buffer);
             // (The stream keeps a pointer to this shared pointer: it must outlive the writes.)
             io::StreamMetadata::Ptr meta = std::make_shared<io::StreamMetadata>(*streamMetadata);
             io::setStreamMetadataPtr(os, meta, /*transfer=*/false);
@@ -91,7 +138,7 @@ public:
             offsetPos[i] = std::int64_t(header.tellp()); // where writeGrid puts the positions
             writeGrid(descriptors[i], grids[i], os, /*seekable=*/true);
             if (!os) throw lic::Error("could not make the record of grid '" + grids[i]->getName() + "'");
-            records[i] = std::move(os).str();
+            records[i] = buffer.take();
         });
         if (!file) return; // the caller checks the stream
 
