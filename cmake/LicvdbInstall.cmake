@@ -3,6 +3,7 @@
 #   P/bin/licvdb                              the command-line tool
 #   P/libexec/licvdb/licvdb-readcheck         the child of every .vdb read (found relative to licvdb)
 #   P/libexec/licvdb/licvdb-image.so          the image module: OIIO, OCIO (loaded on first use)
+#   P/libexec/licvdb/licvdb-mesh.so           the mesh module: VTK (loaded on first use; with VTK)
 #   P/share/licvdb/ocio/                      the raycaster's OCIO config (found relative to the binary)
 #   P/share/licvdb/blender/*.zip              the Blender add-on (scripts/package-addon)
 #   P/include/lic, P/include/vdbexport        public headers
@@ -21,6 +22,10 @@ install(TARGETS licvdb RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR} COMPONENT run
 install(TARGETS licvdb-readcheck RUNTIME DESTINATION ${CMAKE_INSTALL_LIBEXECDIR}/licvdb COMPONENT runtime)
 # The image module (OpenImageIO, OpenColorIO), loaded by licvdb from its ../libexec/licvdb/ (ImageIO.h).
 install(TARGETS licvdb-image LIBRARY DESTINATION ${CMAKE_INSTALL_LIBEXECDIR}/licvdb COMPONENT runtime)
+# The mesh module (VTK's readers), loaded by licvdb from its ../libexec/licvdb/ (MeshInput.h).
+if(LICVDB_VTK)
+  install(TARGETS licvdb-mesh LIBRARY DESTINATION ${CMAKE_INSTALL_LIBEXECDIR}/licvdb COMPONENT runtime)
+endif()
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/share/ocio/ DESTINATION ${CMAKE_INSTALL_DATADIR}/licvdb/ocio
         COMPONENT runtime)
 # The add-on zips, made at build time (scripts/package-addon) so that install only copies.
@@ -106,7 +111,7 @@ simulation, an analytic flow) into line integral convolution volumes written
 as OpenVDB grids: dense noise LIC or sparse streamlines with halos, width and
 colour by scalars, looping animations. It includes a reference halo raycaster
 (licvdb render) and the Blender add-on zips in /usr/share/licvdb/blender.")
-# dpkg-shlibdeps finds every shared library the binaries and the image module link, with versions (libopenvdb10.0,
+# dpkg-shlibdeps finds every shared library the binaries and the modules link, with versions (libopenvdb10.0,
 # libtbb12, libopenimageio2.4, libopencolorio2.1, libimath-3-1-29, libblosc1, libssl3, zlib1g,
 # libopenmpi3, libvtk9.1 with VTK, libjemalloc2 with jemalloc, libstdc++6, libc6: scripts/test-install checks them). licvdb runs nothing else
 # except mpirun for distributed bakes (openmpi-bin, suggested) and Blender for the add-on.
@@ -123,13 +128,10 @@ set(CPACK_DEBIAN_DEVELOPMENT_DESCRIPTION "Development files of licvdb: headers, 
 package. find_package(licvdb) gives lic::lic (fields, streamlines, LIC engines,
 raycaster) and lic::vdbexport (recipes, readers, bakes to .vdb files).")
 # What licvdbConfig.cmake finds: the -dev packages of the public and the (static) private
-# dependencies (images need none: the image module comes with the licvdb package).
+# dependencies (images and meshes need none: their modules come with the licvdb package).
 set(_licvdb_dev_depends "licvdb (= ${PROJECT_VERSION}-1), libopenvdb-dev, libtbb-dev, libboost-iostreams-dev, libimath-dev, nlohmann-json3-dev, libssl-dev, zlib1g-dev, libblosc-dev, liblog4cplus-dev")
 if(LICVDB_MPI)
   string(APPEND _licvdb_dev_depends ", libopenmpi-dev")
-endif()
-if(LICVDB_VTK)
-  string(APPEND _licvdb_dev_depends ", libvtk9-dev")
 endif()
 set(CPACK_DEBIAN_DEVELOPMENT_PACKAGE_DEPENDS "${_licvdb_dev_depends}")
 set(CPACK_DEBIAN_DEVELOPMENT_PACKAGE_SHLIBDEPS OFF)

@@ -353,6 +353,46 @@ TEST_F(MeshTest, BakeReadsAMeshDirectly)
     EXPECT_EQ(inHole, 0u);
 }
 
+// VTK's readers are a module licvdb loads on the first mesh read (MeshModuleApi.h): licvdb itself
+// does not link VTK (its 39 libraries cost every start ~0.05 s), a .vdb bake runs without the
+// module, and a mesh read without it fails with one message naming where it looked, exit 1, no file.
+TEST_F(MeshTest, VtkIsLoadedOnlyByMeshReads)
+{
+    const RunResult libs = runCommand("ldd " + cli_test::shellQuote(LICVDB_EXE));
+    ASSERT_EQ(libs.code, 0) << libs.describe();
+    EXPECT_NE(libs.out.find("libopenvdb"), std::string::npos) << libs.out;
+    EXPECT_EQ(libs.out.find("libvtk"), std::string::npos) << libs.out;
+
+    writeVtu(hexAnnulus(8), work("hex.vtu"));
+    const auto withModule = [&](const std::string& module, const std::vector<std::string>& args) {
+        return runCommand("LICVDB_MESH_MODULE=" + cli_test::shellQuote(module) + " " + cli_test::licvdbCommand(args));
+    };
+    const std::string missing = (work() / "nowhere" / "licvdb-mesh.so").string();
+    for (const std::vector<std::string>& args :
+         {std::vector<std::string>{"convert", work("hex.vtu").string(), "--out", work("hex.vdb").string(), "--voxel-size", "0.1"},
+          bakeArgs(work("hex.vtu"), work("lic.vdb"), {"--voxel-size", "0.1"})}) {
+        const RunResult r = withModule(missing, args);
+        EXPECT_EQ(r.code, 1) << r.describe();
+        EXPECT_NE(r.err.find("mesh module"), std::string::npos) << r.describe();
+        EXPECT_NE(r.err.find(missing), std::string::npos) << r.describe();
+        EXPECT_FALSE(fs::exists(work("hex.vdb")) || fs::exists(work("lic.vdb"))) << r.describe();
+    }
+    std::ofstream(work("fake.so")) << "not a shared object\n";
+    RunResult r = withModule(work("fake.so").string(), {"convert", work("hex.vtu").string(), "--list"});
+    EXPECT_EQ(r.code, 1) << r.describe();
+    EXPECT_NE(r.err.find("cannot be loaded"), std::string::npos) << r.describe();
+
+    // Without the module, a .vdb field still bakes; with it found, the mesh converts.
+    r = withModule(missing, {"field", "abc", "--res", "16,16,16", "--out", work("abc.vdb").string(), "--quiet"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    r = withModule(missing, bakeArgs(work("abc.vdb"), work("abc_lic.vdb"), {}));
+    EXPECT_EQ(r.code, 0) << r.describe();
+    EXPECT_TRUE(fs::is_regular_file(work("abc_lic.vdb"))) << r.describe();
+    r = run({"convert", work("hex.vtu").string(), "--out", work("hex.vdb").string(), "--voxel-size", "0.1"});
+    EXPECT_EQ(r.code, 0) << r.describe();
+    EXPECT_TRUE(fs::is_regular_file(work("hex.vdb"))) << r.describe();
+}
+
 // ---- bad input: exit 2, a message naming the problem, no file -------------------------------
 
 namespace {

@@ -1,14 +1,15 @@
-// libFuzzer target: the mesh path (vdbexport/io/MeshInput.h) on arbitrary bytes as a .vtu file:
+// libFuzzer target: the mesh path (the mesh module's loadMesh, io/MeshModuleApi.h: what
+// vdbexport/io/MeshInput.h runs after its read in a child process) on arbitrary bytes as a .vtu file:
 // VTK's XML reader parses it, then licvdb's checks and VTK's resampling run on what it read.
 // Any exception other than lic::InputError, any crash or sanitizer report is a finding.
 //
 // VTK 9.1's XML reader itself dereferences null on some malformed files (this target found one in
 // 14 runs: a bad ASCII number in a cell array). licvdb reads meshes in a child process first for
-// that reason (MeshInput.cpp readInChildFirst), so here too each input is first parsed by VTK in a
+// that reason (MeshModule.cpp readInChildFirst), so here too each input is first parsed by VTK in a
 // forked child: a child killed by a signal or a time limit is what licvdb refuses as a corrupt
 // file, and only inputs VTK survives go on, in this process, through the whole path (whose
 // coverage guides the fuzzer).
-#include "vdbexport/io/MeshInput.h"
+#include "io/MeshModuleApi.h"
 
 #include <lic/util/Error.h>
 
@@ -68,7 +69,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (!vtkSurvives(path)) return 0;
     for (const char* nanPolicy : {"refuse", "zero"}) {
         try {
-            vdbexport::loadMesh(path, "vtu", options, nanPolicy);
+            vdbexport::mesh_module::loadMesh(path, "vtu", options, nanPolicy);
         } catch (const lic::InputError&) {
         }
     }

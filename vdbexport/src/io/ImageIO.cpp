@@ -11,9 +11,6 @@
 #include <cctype>
 #include <cstdlib>
 #include <filesystem>
-#include <mutex>
-
-#include <dlfcn.h>
 
 namespace fs = std::filesystem;
 
@@ -45,73 +42,26 @@ std::string prepare(const std::string& path)
 
 void commit(const std::string& tmp, const std::string& path) { detail::commitAtomicWrite(tmp, path); }
 
-/// Where the image module may be: $LICVDB_IMAGE_MODULE alone if set; else beside the running
-/// program, in its ../libexec/licvdb/, where this build put it, where `cmake --install` puts it.
-std::vector<fs::path> moduleCandidates()
-{
-    if (const char* env = std::getenv(kImageModuleEnv); env && *env) return {env};
-    std::vector<fs::path> out;
-    std::error_code ec;
-    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-    if (!ec) {
-        out.push_back(exe.parent_path() / image_module::kFileName);
-        out.push_back(exe.parent_path() / ".." / "libexec" / "licvdb" / image_module::kFileName);
-    }
-#ifdef LICVDB_IMAGE_MODULE_BUILD
-    out.emplace_back(LICVDB_IMAGE_MODULE_BUILD);
-#endif
-#ifdef LICVDB_IMAGE_MODULE_INSTALLED
-    out.emplace_back(LICVDB_IMAGE_MODULE_INSTALLED);
-#endif
-    return out;
-}
-
 /// The module's table, loaded once (never unloaded). @throw lic::Error naming where it looked.
 const image_module::Api& imageModule()
 {
-    static std::once_flag once;
-    static const image_module::Api* api = nullptr;
-    static std::string failure;
-    std::call_once(once, [] {
-        std::string tried;
-        for (const fs::path& p : moduleCandidates()) {
-            std::error_code ec;
-            if (!fs::is_regular_file(p, ec)) {
-                tried += (tried.empty() ? "" : ", ") + p.lexically_normal().string();
-                continue;
-            }
-            void* handle = ::dlopen(p.c_str(), RTLD_NOW | RTLD_LOCAL);
-            if (!handle) {
-                const char* why = ::dlerror();
-                failure = "licvdb's image module " + quote(p.lexically_normal().string()) + " cannot be loaded ("
-                          + (why ? why : "no reason given") + "); reinstall licvdb";
-                return;
-            }
-            using Entry = const image_module::Api* (*)();
-            const auto entry = reinterpret_cast<Entry>(::dlsym(handle, image_module::kEntry));
-            const image_module::Api* table = entry ? entry() : nullptr;
-            if (!table || table->version != image_module::kVersion) {
-                failure = "licvdb's image module " + quote(p.lexically_normal().string())
-                          + " is not the one this licvdb was built with; reinstall licvdb";
-                return;
-            }
-            api = table;
-            return;
-        }
-        failure = std::string("licvdb's image module (") + image_module::kFileName
-                  + ": OpenImageIO, OpenColorIO) is missing; looked for " + tried + "; reinstall licvdb or set $"
-                  + kImageModuleEnv;
-    });
-    if (!api) throw lic::Error("cannot read or write images: " + failure);
-    return *api;
+#ifndef LICVDB_IMAGE_MODULE_BUILD
+#define LICVDB_IMAGE_MODULE_BUILD ""
+#endif
+#ifndef LICVDB_IMAGE_MODULE_INSTALLED
+#define LICVDB_IMAGE_MODULE_INSTALLED ""
+#endif
+    static const module::Spec spec{"image module", image_module::kFileName, image_module::kEntry, kImageModuleEnv,
+                                   LICVDB_IMAGE_MODULE_BUILD, LICVDB_IMAGE_MODULE_INSTALLED,
+                                   "OpenImageIO, OpenColorIO"};
+    try {
+        return *static_cast<const image_module::Api*>(module::load(spec, image_module::kVersion));
+    } catch (const lic::Error& e) {
+        throw lic::Error(std::string("cannot read or write images: ") + e.what());
+    }
 }
 
-/// Turns an entry's Status into the exception ImageIO.h documents.
-void check(const image_module::Status& s)
-{
-    if (s.kind == image_module::Status::Input) throw lic::InputError(s.message);
-    if (s.kind != image_module::Status::Ok) throw lic::Error(s.message);
-}
+using module::check;
 
 /// Runs `write(tmp)` on the temporary name of `path`, then commits; removes it on failure.
 template <typename F>

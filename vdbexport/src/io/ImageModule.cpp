@@ -24,16 +24,7 @@ std::string quote(const std::string& s) { return "'" + s + "'"; }
 template <typename F>
 Status guarded(F&& body)
 {
-    try {
-        body();
-        return {};
-    } catch (const lic::InputError& e) {
-        return {Status::Input, e.what()};
-    } catch (const std::exception& e) {
-        return {Status::Failure, e.what()};
-    } catch (...) {
-        return {Status::Failure, "unknown error in the image module"};
-    }
+    return module::guarded(std::forward<F>(body), "the image module");
 }
 
 std::vector<float> display(const lic::Image& image, const DisplayTransform& t)

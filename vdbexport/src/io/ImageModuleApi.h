@@ -1,12 +1,10 @@
 // The image module's interface: what licvdb-image.so (ImageModule.cpp: OpenImageIO, OpenColorIO)
 // gives the loader in ImageIO.cpp. OpenImageIO links some 260 shared libraries (codecs, OpenCV,
 // FFmpeg, GDAL...) whose relocation cost every licvdb start ~0.3 s of CPU; only image commands
-// (render, the gallery's pictures) need them, so they are loaded on first use (dlopen).
-// Built with licvdb by the same compiler: the table passes C++ types. Errors do not cross the
-// boundary as exceptions: each entry returns a Status the loader turns into lic::Error or
-// lic::InputError.
+// (render, the gallery's pictures) need them, so they are loaded on first use (Module.h).
 #pragma once
 
+#include "Module.h"
 #include "vdbexport/io/ImageIO.h"
 
 #include <algorithm>
@@ -25,13 +23,7 @@ inline constexpr int kVersion = 1;
 inline constexpr const char* kFileName = "licvdb-image.so";
 inline constexpr const char* kEntry = "licvdb_image_module";
 
-/// What an entry reports: ok, a runtime failure (lic::Error) or bad input (lic::InputError).
-struct Status
-{
-    enum Kind { Ok = 0, Failure = 1, Input = 2 };
-    int kind = Ok;
-    std::string message;
-};
+using module::Status;
 
 struct Api
 {

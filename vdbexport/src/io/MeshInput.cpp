@@ -1,9 +1,10 @@
 // CFD meshes through VTK: its readers parse the files, vtkResampleToImage (VTK's probe) samples
-// them on the VDB lattice, and this file turns the samples inside the mesh into grids.
-#include "vdbexport/io/MeshInput.h"
+// them on the VDB lattice, and this file turns the samples inside the mesh into grids. Built as
+// licvdb's mesh module, licvdb-mesh.so (MeshModuleApi.h), which licvdb loads on first use; the
+// functions of MeshInput.h (MeshModule.cpp) read the mesh in a child process first, then call these.
+#include "MeshModuleApi.h"
 
 #include "io/DenseCommon.h"
-#include "vdbexport/io/VdbCheck.h"
 
 #include <lic/util/Error.h>
 
@@ -56,20 +57,11 @@
 
 namespace fs = std::filesystem;
 
-namespace vdbexport {
+namespace vdbexport::mesh_module {
 
 using detail::q;
 
 namespace {
-
-/// A number exactly (17 significant digits), for a child's command line.
-std::string num17(double v)
-{
-    std::ostringstream o;
-    o.precision(17);
-    o << v;
-    return o.str();
-}
 
 /// A number as a user writes it: up to 6 significant digits, no trailing zeros.
 std::string num(double v)
@@ -674,24 +666,8 @@ struct Mesh
     std::vector<double> times;
 };
 
-/// VTK's readers are not hardened against malformed files (VTK 9.1's XML reader dereferences null
-/// on a bad ASCII number: found by fuzz_vtu): `licvdb` first reads the mesh in a child process
-/// (`licvdb convert PATH --list`, as .vdb files are read, see VdbCheck.h), so a file that crashes
-/// or hangs VTK is refused without taking the program down. Nothing happens in library use or in
-/// the child itself (no executable set).
-void readInChildFirst(const std::string& path, const std::string& format, const MeshOptions& options)
-{
-    if (readIsolationExecutable().empty()) return;
-    std::vector<std::string> args{"convert", "--list", "--quiet", "--format", format};
-    if (options.time) args.insert(args.end(), {"--time", num17(*options.time)});
-    if (!options.solution.empty()) args.insert(args.end(), {"--solution", options.solution});
-    args.insert(args.end(), {"--", path});
-    checkReadInIsolatedProcess(path, args, "VTK's reader", describeFormat(format));
-}
-
 Mesh readMesh(const std::string& path, const std::string& format, const MeshOptions& options)
 {
-    readInChildFirst(path, format, options);
     Mesh m;
     m.data = readSingle(path, format, options, m.time, m.times);
     if (!m.data) detail::inputError(path, "VTK read nothing");
@@ -711,9 +687,6 @@ Mesh readMesh(const std::string& path, const std::string& format, const MeshOpti
 }
 
 } // namespace
-
-bool meshInputAvailable() { return true; }
-
 
 std::vector<double> meshTimes(const std::string& path, const std::string& format)
 {
@@ -972,4 +945,36 @@ LoadedField loadMesh(const std::string& path, const std::string& format, const M
     return out;
 }
 
-} // namespace vdbexport
+namespace {
+
+// The module's table: the functions above, their exceptions reported as a Status.
+constexpr const char* kWhere = "the mesh module";
+
+Status timesEntry(const std::string& path, const std::string& format, std::vector<double>& times)
+{
+    return module::guarded([&] { times = mesh_module::meshTimes(path, format); }, kWhere);
+}
+
+Status describeEntry(const std::string& path, const std::string& format, const MeshOptions& options, MeshSummary& summary)
+{
+    return module::guarded([&] { summary = mesh_module::describeMesh(path, format, options); }, kWhere);
+}
+
+Status loadEntry(const std::string& path, const std::string& format, const MeshOptions& options,
+                 const std::string& nanPolicy, LoadedField& field)
+{
+    return module::guarded([&] { field = mesh_module::loadMesh(path, format, options, nanPolicy); }, kWhere);
+}
+
+std::string describeFormatEntry(const std::string& format) { return describeFormat(format); }
+
+const Api kApi{kVersion, timesEntry, describeEntry, loadEntry, describeFormatEntry};
+
+} // namespace
+
+} // namespace vdbexport::mesh_module
+
+extern "C" __attribute__((visibility("default"))) const vdbexport::mesh_module::Api* licvdb_mesh_module()
+{
+    return &vdbexport::mesh_module::kApi;
+}

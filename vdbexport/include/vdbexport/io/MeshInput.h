@@ -35,8 +35,13 @@ struct MeshOptions
     std::function<bool(double)> progress;
 };
 
-/// True when licvdb was built with VTK (mesh formats available).
+/// True when licvdb was built with VTK (mesh formats available). VTK's readers live in licvdb's
+/// mesh module (libexec/licvdb/licvdb-mesh.so), loaded on the first mesh read; a licvdb that
+/// cannot find it fails that read with a lic::Error naming where it looked.
 bool meshInputAvailable();
+
+/// An environment variable naming the mesh module's file, instead of where licvdb looks for it.
+inline constexpr const char* kMeshModuleEnv = "LICVDB_MESH_MODULE";
 
 /// The mesh formats: vtu, vts, vtm, vtpc, pvd, vtk-mesh (legacy unstructured/structured grid),
 /// plot3d, openfoam.
