@@ -51,11 +51,11 @@ const image_module::Api& imageModule()
 #ifndef LICVDB_IMAGE_MODULE_INSTALLED
 #define LICVDB_IMAGE_MODULE_INSTALLED ""
 #endif
-    static const module::Spec spec{"image module", image_module::kFileName, image_module::kEntry, kImageModuleEnv,
+    static const module::Spec spec{"image module", image_module::kModule, kImageModuleEnv,
                                    LICVDB_IMAGE_MODULE_BUILD, LICVDB_IMAGE_MODULE_INSTALLED,
                                    "OpenImageIO, OpenColorIO"};
     try {
-        return *static_cast<const image_module::Api*>(module::load(spec, image_module::kVersion));
+        return *static_cast<const image_module::Api*>(module::load(spec));
     } catch (const lic::Error& e) {
         throw lic::Error(std::string("cannot read or write images: ") + e.what());
     }

@@ -160,7 +160,7 @@ Status readImageEntry(const std::string& path, lic::Image& image, std::string& c
     });
 }
 
-const Api kApi{kVersion, toDisplayEntry, writeImageEntry, writeGifEntry, readImageEntry};
+const Api kApi{kModule.version, toDisplayEntry, writeImageEntry, writeGifEntry, readImageEntry};
 
 } // namespace
 

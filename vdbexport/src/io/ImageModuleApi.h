@@ -16,15 +16,11 @@
 
 namespace vdbexport::image_module {
 
-/// Bumped whenever Api changes; the loader refuses a module of another version.
-inline constexpr int kVersion = 1;
-
-/// The module's file name, and the symbol that returns its table.
-inline constexpr const char* kFileName = "licvdb-image.so";
-inline constexpr const char* kEntry = "licvdb_image_module";
+inline constexpr module::Identity kModule{"licvdb-image.so", "licvdb_image_module", /*version=*/1};
 
 using module::Status;
 
+/// The table (kModule.version is bumped whenever it changes).
 struct Api
 {
     int version;

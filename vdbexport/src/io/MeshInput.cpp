@@ -968,7 +968,7 @@ Status loadEntry(const std::string& path, const std::string& format, const MeshO
 
 std::string describeFormatEntry(const std::string& format) { return describeFormat(format); }
 
-const Api kApi{kVersion, timesEntry, describeEntry, loadEntry, describeFormatEntry};
+const Api kApi{kModule.version, timesEntry, describeEntry, loadEntry, describeFormatEntry};
 
 } // namespace
 

@@ -19,9 +19,9 @@ const mesh_module::Api& meshModule()
 #ifndef LICVDB_MESH_MODULE_INSTALLED
 #define LICVDB_MESH_MODULE_INSTALLED ""
 #endif
-    static const module::Spec spec{"mesh module", mesh_module::kFileName, mesh_module::kEntry, kMeshModuleEnv,
+    static const module::Spec spec{"mesh module", mesh_module::kModule, kMeshModuleEnv,
                                    LICVDB_MESH_MODULE_BUILD, LICVDB_MESH_MODULE_INSTALLED, "VTK's mesh readers"};
-    return *static_cast<const mesh_module::Api*>(module::load(spec, mesh_module::kVersion));
+    return *static_cast<const mesh_module::Api*>(module::load(spec));
 }
 
 /// A number exactly (17 significant digits), for a child's command line.

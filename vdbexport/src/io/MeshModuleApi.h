@@ -12,15 +12,11 @@
 
 namespace vdbexport::mesh_module {
 
-/// Bumped whenever Api changes; the loader refuses a module of another version.
-inline constexpr int kVersion = 1;
-
-/// The module's file name, and the symbol that returns its table.
-inline constexpr const char* kFileName = "licvdb-mesh.so";
-inline constexpr const char* kEntry = "licvdb_mesh_module";
+inline constexpr module::Identity kModule{"licvdb-mesh.so", "licvdb_mesh_module", /*version=*/1};
 
 using module::Status;
 
+/// The table (kModule.version is bumped whenever it changes).
 struct Api
 {
     int version;

@@ -23,8 +23,8 @@ std::vector<fs::path> candidates(const Spec& spec)
     std::error_code ec;
     const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
     if (!ec) {
-        out.push_back(exe.parent_path() / spec.fileName);
-        out.push_back(exe.parent_path() / ".." / "libexec" / "licvdb" / spec.fileName);
+        out.push_back(exe.parent_path() / spec.id.fileName);
+        out.push_back(exe.parent_path() / ".." / "libexec" / "licvdb" / spec.id.fileName);
     }
     for (const char* p : {spec.buildPath, spec.installedPath})
         if (p && *p) out.emplace_back(p);
@@ -32,7 +32,7 @@ std::vector<fs::path> candidates(const Spec& spec)
 }
 
 /// The first candidate that exists, opened, its table returned; or why not in `failure`.
-const void* open(const Spec& spec, int version, std::string& failure)
+const void* open(const Spec& spec, std::string& failure)
 {
     const std::string name = std::string("licvdb's ") + spec.name;
     std::string tried;
@@ -50,21 +50,21 @@ const void* open(const Spec& spec, int version, std::string& failure)
             return nullptr;
         }
         using Entry = const void* (*)();
-        const auto entry = reinterpret_cast<Entry>(::dlsym(handle, spec.entry));
+        const auto entry = reinterpret_cast<Entry>(::dlsym(handle, spec.id.entry));
         const void* table = entry ? entry() : nullptr;
-        if (!table || *static_cast<const int*>(table) != version) {
+        if (!table || *static_cast<const int*>(table) != spec.id.version) {
             failure = name + " " + shown + " is not the one this licvdb was built with; reinstall licvdb";
             return nullptr;
         }
         return table;
     }
-    failure = name + " (" + spec.fileName + ": " + spec.contents + ") is missing; looked for " + tried + "; reinstall licvdb or set $" + spec.envVar;
+    failure = name + " (" + spec.id.fileName + ": " + spec.contents + ") is missing; looked for " + tried + "; reinstall licvdb or set $" + spec.envVar;
     return nullptr;
 }
 
 } // namespace
 
-const void* load(const Spec& spec, int version)
+const void* load(const Spec& spec)
 {
     struct Loaded
     {
@@ -74,8 +74,8 @@ const void* load(const Spec& spec, int version)
     static std::mutex mutex;
     static std::map<std::string, Loaded> loaded; // by file name: each module opened once
     std::lock_guard lock(mutex);
-    auto [it, fresh] = loaded.try_emplace(spec.fileName);
-    if (fresh) it->second.table = open(spec, version, it->second.failure);
+    auto [it, fresh] = loaded.try_emplace(spec.id.fileName);
+    if (fresh) it->second.table = open(spec, it->second.failure);
     if (!it->second.table) throw lic::Error(it->second.failure);
     return it->second.table;
 }

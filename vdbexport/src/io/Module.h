@@ -49,12 +49,21 @@ inline void check(const Status& s)
     if (s.kind != Status::Ok) throw lic::Error(s.message);
 }
 
+/// Which module a file is: its name, the extern "C" function that returns its table, and the
+/// table's version (its first member, `int version`; bumped whenever the table changes, and the
+/// loader refuses a module of another version).
+struct Identity
+{
+    const char* fileName; ///< e.g. "licvdb-mesh.so"
+    const char* entry;    ///< e.g. "licvdb_mesh_module"
+    int version;
+};
+
 /// Where a module is and what it is called.
 struct Spec
 {
     const char* name;          ///< for messages: "image module", "mesh module"
-    const char* fileName;      ///< e.g. "licvdb-mesh.so"
-    const char* entry;         ///< the extern "C" function that returns its table
+    Identity id;
     const char* envVar;        ///< an environment variable that names the file instead
     const char* buildPath;     ///< where this build put it ("" if unknown)
     const char* installedPath; ///< where `cmake --install` puts it ("" if unknown)
@@ -62,9 +71,9 @@ struct Spec
 };
 
 /// @brief Loads the module (once per process; never unloaded) and returns its table, whose first
-///        member must be `int version` equal to `version`. Looks at $envVar alone if set; else
-///        beside the running program, in its ../libexec/licvdb/, at buildPath, at installedPath.
+///        member must be `int version` equal to spec.id.version. Looks at $envVar alone if set;
+///        else beside the running program, in its ../libexec/licvdb/, at buildPath, at installedPath.
 /// @throw lic::Error naming where it looked, or why the file found could not be used.
-const void* load(const Spec& spec, int version);
+const void* load(const Spec& spec);
 
 } // namespace vdbexport::module
