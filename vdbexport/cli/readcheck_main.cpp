@@ -2,8 +2,8 @@
 // `licvdb-readcheck -- FILE` runs layer 1 (the structural walk) and then reads and describes every
 // grid with OpenVDB, in this process: it is what `licvdb` starts as the child of every .vdb read,
 // so that whatever a file does to OpenVDB's reader (a crash, a hang) stays out of the bake. It
-// links OpenVDB and its own read code only, so it starts in a fraction of the time `licvdb`
-// (with OpenImageIO, OpenColorIO, VTK and MPI) takes. Exit 0: intact; 2: refused, with
+// links OpenVDB and its own read code only (20 shared libraries; licvdb links 27, MPI among them,
+// and loads OpenImageIO and VTK only when it needs them), so it starts sooner than `licvdb`. Exit 0: intact; 2: refused, with
 // "licvdb-readcheck: error: REASON" on stderr; 1: another failure.
 #include "vdbexport/io/Info.h"
 #include "vdbexport/io/VdbCheck.h"
