@@ -368,9 +368,9 @@ TEST_F(MeshTest, VtkIsLoadedOnlyByMeshReads)
         return runCommand("LICVDB_MESH_MODULE=" + cli_test::shellQuote(module) + " " + cli_test::licvdbCommand(args));
     };
     const std::string missing = (work() / "nowhere" / "licvdb-mesh.so").string();
-    for (const std::vector<std::string>& args :
-         {std::vector<std::string>{"convert", work("hex.vtu").string(), "--out", work("hex.vdb").string(), "--voxel-size", "0.1"},
-          bakeArgs(work("hex.vtu"), work("lic.vdb"), {"--voxel-size", "0.1"})}) {
+    const std::vector<std::string> convert{"convert", work("hex.vtu").string(), "--out", work("hex.vdb").string(),
+                                           "--voxel-size", "0.1"};
+    for (const std::vector<std::string>& args : {convert, bakeArgs(work("hex.vtu"), work("lic.vdb"), {"--voxel-size", "0.1"})}) {
         const RunResult r = withModule(missing, args);
         EXPECT_EQ(r.code, 1) << r.describe();
         EXPECT_NE(r.err.find("mesh module"), std::string::npos) << r.describe();

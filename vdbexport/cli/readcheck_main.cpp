@@ -3,8 +3,8 @@
 // grid with OpenVDB, in this process: it is what `licvdb` starts as the child of every .vdb read,
 // so that whatever a file does to OpenVDB's reader (a crash, a hang) stays out of the bake. It
 // links OpenVDB and its own read code only (20 shared libraries; licvdb links 27, MPI among them,
-// and loads OpenImageIO and VTK only when it needs them), so it starts sooner than `licvdb`. Exit 0: intact; 2: refused, with
-// "licvdb-readcheck: error: REASON" on stderr; 1: another failure.
+// and loads OpenImageIO and VTK only when it needs them), so it starts sooner than `licvdb`.
+// Exit 0: intact; 2: refused, with "licvdb-readcheck: error: REASON" on stderr; 1: another failure.
 #include "vdbexport/io/Info.h"
 #include "vdbexport/io/VdbCheck.h"
 #include "vdbexport/io/VdbIO.h"

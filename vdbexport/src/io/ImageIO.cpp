@@ -45,12 +45,6 @@ void commit(const std::string& tmp, const std::string& path) { detail::commitAto
 /// The module's table, loaded once (never unloaded). @throw lic::Error naming where it looked.
 const image_module::Api& imageModule()
 {
-#ifndef LICVDB_IMAGE_MODULE_BUILD
-#define LICVDB_IMAGE_MODULE_BUILD ""
-#endif
-#ifndef LICVDB_IMAGE_MODULE_INSTALLED
-#define LICVDB_IMAGE_MODULE_INSTALLED ""
-#endif
     static const module::Spec spec{"image module", image_module::kModule, kImageModuleEnv,
                                    LICVDB_IMAGE_MODULE_BUILD, LICVDB_IMAGE_MODULE_INSTALLED,
                                    "OpenImageIO, OpenColorIO"};

@@ -955,7 +955,8 @@ Status timesEntry(const std::string& path, const std::string& format, std::vecto
     return module::guarded([&] { times = mesh_module::meshTimes(path, format); }, kWhere);
 }
 
-Status describeEntry(const std::string& path, const std::string& format, const MeshOptions& options, MeshSummary& summary)
+Status describeEntry(const std::string& path, const std::string& format, const MeshOptions& options,
+                     MeshSummary& summary)
 {
     return module::guarded([&] { summary = mesh_module::describeMesh(path, format, options); }, kWhere);
 }

@@ -13,12 +13,6 @@ namespace {
 
 const mesh_module::Api& meshModule()
 {
-#ifndef LICVDB_MESH_MODULE_BUILD
-#define LICVDB_MESH_MODULE_BUILD ""
-#endif
-#ifndef LICVDB_MESH_MODULE_INSTALLED
-#define LICVDB_MESH_MODULE_INSTALLED ""
-#endif
     static const module::Spec spec{"mesh module", mesh_module::kModule, kMeshModuleEnv,
                                    LICVDB_MESH_MODULE_BUILD, LICVDB_MESH_MODULE_INSTALLED, "VTK's mesh readers"};
     return *static_cast<const mesh_module::Api*>(module::load(spec));

@@ -1,6 +1,8 @@
 // Loading licvdb's run-time modules (Module.h).
 #include "Module.h"
 
+#include "DenseCommon.h"
+
 #include <filesystem>
 #include <map>
 #include <mutex>
@@ -13,8 +15,6 @@ namespace fs = std::filesystem;
 namespace vdbexport::module {
 
 namespace {
-
-std::string quote(const std::string& s) { return "'" + s + "'"; }
 
 std::vector<fs::path> candidates(const Spec& spec)
 {
@@ -37,7 +37,7 @@ const void* open(const Spec& spec, std::string& failure)
     const std::string name = std::string("licvdb's ") + spec.name;
     std::string tried;
     for (const fs::path& p : candidates(spec)) {
-        const std::string shown = quote(p.lexically_normal().string());
+        const std::string shown = detail::q(p.lexically_normal().string());
         std::error_code ec;
         if (!fs::is_regular_file(p, ec)) {
             tried += (tried.empty() ? "" : ", ") + p.lexically_normal().string();
@@ -46,7 +46,8 @@ const void* open(const Spec& spec, std::string& failure)
         void* handle = ::dlopen(p.c_str(), RTLD_NOW | RTLD_LOCAL);
         if (!handle) {
             const char* why = ::dlerror();
-            failure = name + " " + shown + " cannot be loaded (" + (why ? why : "no reason given") + "); reinstall licvdb";
+            failure = name + " " + shown + " cannot be loaded (" + (why ? why : "no reason given")
+                      + "); reinstall licvdb";
             return nullptr;
         }
         using Entry = const void* (*)();
@@ -58,7 +59,8 @@ const void* open(const Spec& spec, std::string& failure)
         }
         return table;
     }
-    failure = name + " (" + spec.id.fileName + ": " + spec.contents + ") is missing; looked for " + tried + "; reinstall licvdb or set $" + spec.envVar;
+    failure = name + " (" + spec.id.fileName + ": " + spec.contents + ") is missing; looked for " + tried
+              + "; reinstall licvdb or set $" + spec.envVar;
     return nullptr;
 }
 
