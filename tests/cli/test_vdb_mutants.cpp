@@ -233,10 +233,18 @@ TEST_F(VdbMutantsTest, KilledBakeLeavesNoFile)
     const auto samples = vdb_samples::writeVdbSamples(in, 24);
     const fs::path outDir = w / "out";
     fs::create_directories(outDir);
+    const std::string bake = cli_test::licvdbCommand(
+        bakeArgs(samples[0], outDir / "k.vdb", {"--quiet", "--length", "12", "--upsample", "2", "--frames", "3"}));
+    // The kills land at fractions of one whole bake's time on this machine now (a fixed delay
+    // lets a fast machine finish first), and once after it.
+    const auto t0 = std::chrono::steady_clock::now();
+    const RunResult whole = runCommand(bake);
+    const double seconds = std::max(0.05, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    ASSERT_EQ(whole.code, 0) << whole.describe();
+    for (const auto& e : listing(outDir)) fs::remove(outDir / e);
     int killed = 0, finished = 0;
-    for (const double delay : {0.05, 0.15, 0.3, 0.5, 0.8, 1.2}) {
-        const std::string bake = cli_test::licvdbCommand(
-            bakeArgs(samples[0], outDir / "k.vdb", {"--quiet", "--length", "12", "--upsample", "2", "--frames", "3"}));
+    for (const double fraction : {0.1, 0.25, 0.4, 0.55, 0.7, 1.5}) {
+        const double delay = fraction * seconds;
         const RunResult r = runCommand("( " + bake + " & pid=$!; sleep " + std::to_string(delay) +
                                        "; kill -9 $pid 2>/dev/null && echo killed; wait $pid; true )");
         const auto left = listing(outDir);
@@ -251,6 +259,7 @@ TEST_F(VdbMutantsTest, KilledBakeLeavesNoFile)
         }
         for (const auto& e : left) fs::remove(outDir / e);
     }
-    std::cout << "[ killed   ] " << killed << " bakes killed mid-way left nothing; " << finished << " had finished\n";
+    std::cout << "[ killed   ] " << killed << " bakes killed mid-way left nothing; " << finished
+              << " had finished (a whole bake: " << seconds << " s)\n";
     EXPECT_GE(killed, 3); // most kills land while the bake runs
 }

@@ -507,55 +507,98 @@ typename GridT::Ptr noisyGrid(const std::string& name, int leaves, bool half, un
     return grid;
 }
 
+/// A float grid whose leaves cover each mask-compression kind the writer meets: inactive voxels
+/// all background, one other inactive value, two (a selection mask), more than two (no mask
+/// compression), and no inactive voxel at all.
+openvdb::FloatGrid::Ptr inactiveKindsGrid(const std::string& name)
+{
+    auto grid = openvdb::FloatGrid::create(0.25f);
+    grid->setName(name);
+    auto acc = grid->getAccessor();
+    for (int kind = 0; kind < 5; ++kind)
+        for (int v = 0; v < 512; ++v) {
+            const openvdb::Coord ijk(8 * kind + (v >> 6), (v >> 3) & 7, v & 7);
+            const float value = float(v) / 512.0f;
+            if (kind == 4 || v % 3 != 0) acc.setValueOn(ijk, value);
+            else if (kind == 0) acc.setValueOff(ijk, 0.25f);
+            else if (kind == 1) acc.setValueOff(ijk, 0.5f);
+            else if (kind == 2) acc.setValueOff(ijk, v % 2 ? 0.5f : 0.75f);
+            else acc.setValueOff(ijk, float(v % 5));
+        }
+    return grid;
+}
+
 } // namespace
 
-// detail::writeVdbFile makes the grids' records side by side; the file must be what
-// io::File::write makes, byte for byte, but for the random UUID in the header, and read back.
-TEST_F(VdbIOTest, SideBySideWriteGivesTheBytesOfOpenVdbsWriter)
+// detail::writeVdbFile compresses each leaf once, on all cores, and writes the records itself;
+// the file must be what io::File::write makes, byte for byte, but for the random UUID in the
+// header, and read back. Both ways: the compressed leaves held in memory, and streamed (a hold
+// of 0 bytes: every grid compressed twice and written chunk by chunk).
+TEST_F(VdbIOTest, ParallelWriteGivesTheBytesOfOpenVdbsWriter)
 {
-    openvdb::GridCPtrVec grids{noisyGrid<openvdb::FloatGrid>("density", 40, false, 1),
+    auto levelSet = noisyGrid<openvdb::FloatGrid>("distance", 3, false, 7);
+    levelSet->setGridClass(openvdb::GRID_LEVEL_SET);
+    auto halfVectors = noisyGrid<openvdb::Vec3SGrid>("tangent", 5, true, 8);
+    auto doubles = noisyGrid<openvdb::DoubleGrid>("temperature", 4, false, 9); // OpenVDB's own path
+    auto empty = openvdb::FloatGrid::create();
+    empty->setName("empty");
+    openvdb::GridCPtrVec grids{noisyGrid<openvdb::FloatGrid>("density", 150, false, 1),
                                noisyGrid<openvdb::FloatGrid>("halo", 25, true, 2),
                                noisyGrid<openvdb::Vec3SGrid>("velocity", 9, false, 3),
-                               noisyGrid<openvdb::FloatGrid>("width", 1, false, 4)};
+                               noisyGrid<openvdb::FloatGrid>("width", 1, false, 4),
+                               inactiveKindsGrid("kinds"), levelSet, halfVectors, doubles, empty};
     openvdb::MetaMap meta;
     meta.insertMeta("creator", openvdb::StringMetadata("licvdb test"));
-    for (std::size_t n : {std::size_t(1), std::size_t(2), std::size_t(4)}) {
-        const openvdb::GridCPtrVec some(grids.begin(), grids.begin() + std::ptrdiff_t(n));
-        const std::string ours = file("ours" + std::to_string(n) + ".vdb"), ref = file("ref" + std::to_string(n) + ".vdb");
-        vdbexport::detail::writeVdbFile(ours, some, meta);
-        openvdb::io::File(ref).write(some, meta);
-        const std::string a = fileBytes(ours), b = fileBytes(ref);
-        ASSERT_EQ(a.size(), b.size()) << n << " grids";
-        // The header: magic (8), file version (4), library version (8), offsets flag (1), then
-        // the UUID as 36 characters.
-        constexpr std::size_t kUuid = 21, kUuidEnd = 21 + 36;
-        ASSERT_GT(a.size(), kUuidEnd);
-        EXPECT_NE(a.substr(kUuid, 36), b.substr(kUuid, 36)) << "two writes gave the same random UUID";
-        EXPECT_EQ(a.substr(0, kUuid), b.substr(0, kUuid)) << n << " grids";
-        EXPECT_TRUE(a.substr(kUuidEnd) == b.substr(kUuidEnd)) << n << " grids: the files differ after the header";
+    for (const std::uint64_t hold : {vdbexport::detail::kWriteHoldBytes, std::uint64_t(0)})
+        for (std::size_t n : {std::size_t(1), std::size_t(2), std::size_t(4), grids.size()}) {
+            const openvdb::GridCPtrVec some(grids.begin(), grids.begin() + std::ptrdiff_t(n));
+            const std::string what = std::to_string(n) + " grids, hold " + std::to_string(hold);
+            const std::string ours = file("ours" + std::to_string(n) + ".vdb"), ref = file("ref" + std::to_string(n) + ".vdb");
+            vdbexport::detail::writeVdbFile(ours, some, meta, hold);
+            openvdb::io::File(ref).write(some, meta);
+            const std::string a = fileBytes(ours), b = fileBytes(ref);
+            ASSERT_EQ(a.size(), b.size()) << what;
+            // The header: magic (8), file version (4), library version (8), offsets flag (1), then
+            // the UUID as 36 characters.
+            constexpr std::size_t kUuid = 21, kUuidEnd = 21 + 36;
+            ASSERT_GT(a.size(), kUuidEnd);
+            EXPECT_NE(a.substr(kUuid, 36), b.substr(kUuid, 36)) << "two writes gave the same random UUID";
+            EXPECT_EQ(a.substr(0, kUuid), b.substr(0, kUuid)) << what;
+            EXPECT_TRUE(a.substr(kUuidEnd) == b.substr(kUuidEnd)) << what << ": the files differ after the header";
 
-        openvdb::io::File in(ours);
-        in.open(/*delayLoad=*/false);
-        const auto back = in.getGrids();
-        ASSERT_EQ(back->size(), n);
-        for (std::size_t i = 0; i < n; ++i) {
-            EXPECT_EQ((*back)[i]->getName(), some[i]->getName());
-            EXPECT_EQ((*back)[i]->activeVoxelCount(), some[i]->activeVoxelCount());
+            openvdb::io::File in(ours);
+            in.open(/*delayLoad=*/false);
+            const auto back = in.getGrids(); // (in name order)
+            ASSERT_EQ(back->size(), n);
+            for (std::size_t i = 0; i < n; ++i) {
+                const auto g = std::find_if(back->begin(), back->end(),
+                                            [&](const auto& b) { return b->getName() == some[i]->getName(); });
+                ASSERT_NE(g, back->end()) << what << ": " << some[i]->getName();
+                EXPECT_EQ((*g)->activeVoxelCount(), some[i]->activeVoxelCount()) << what;
+            }
+            in.close();
+            // Random access by name uses the descriptors' stream positions, and a delayed load
+            // the table of compressed sizes: every float grid's values must come back.
+            openvdb::io::File lazy(ours);
+            lazy.open(/*delayLoad=*/true);
+            for (std::size_t i = 0; i < n; ++i) {
+                const auto src = openvdb::gridConstPtrCast<openvdb::FloatGrid>(some[i]);
+                if (!src) continue;
+                const auto got = openvdb::gridPtrCast<openvdb::FloatGrid>(lazy.readGrid(src->getName()));
+                ASSERT_TRUE(got) << what << ": " << src->getName();
+                for (auto it = src->cbeginValueAll(); it; ++it) {
+                    if (!it.isVoxelValue()) continue;
+                    const float want = src->saveFloatAsHalf() ? float(openvdb::math::half(*it)) : *it;
+                    ASSERT_EQ(got->tree().getValue(it.getCoord()), want) << what << ": " << src->getName();
+                }
+            }
+            lazy.close();
         }
-        // Random access by name uses the descriptors' stream positions: the last grid's must point
-        // at its record.
-        const auto last = openvdb::gridPtrCast<openvdb::FloatGrid>(in.readGrid(some[n - 1]->getName()));
-        in.close();
-        ASSERT_TRUE(last) << n << " grids"; // (the last of 1, 2 and 4 is a float grid)
-        const auto src = openvdb::gridConstPtrCast<openvdb::FloatGrid>(some[n - 1]);
-        for (auto it = src->cbeginValueOn(); it; ++it)
-            ASSERT_EQ(last->tree().getValue(it.getCoord()), src->saveFloatAsHalf() ? float(openvdb::math::half(*it)) : *it);
-    }
 }
 
 // Names Archive would change (a repeated name) take io::File::write's path: still a readable
 // file with both grids.
-TEST_F(VdbIOTest, SideBySideWriteFallsBackForRepeatedNames)
+TEST_F(VdbIOTest, ParallelWriteFallsBackForRepeatedNames)
 {
     openvdb::GridCPtrVec grids{noisyGrid<openvdb::FloatGrid>("density", 3, false, 1),
                                noisyGrid<openvdb::FloatGrid>("density", 2, false, 2)};

@@ -11,12 +11,15 @@
 
 #include <log4cplus/logger.h>
 
+#include <tbb/parallel_invoke.h>
+
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <csignal>
 #include <cstdlib>
 #include <cstring>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -677,6 +680,28 @@ void OutputSet::add(Pending&& file)
     file.mFile.named.clear();
 }
 
+namespace {
+
+/// The structure of the file written at `tmp` (for `path`), and its grids' headers read back.
+void checkWritten(const std::string& path, const std::string& tmp, std::size_t gridCount)
+{
+    try {
+        checkVdbStructure(tmp, VdbCheckDepth::Layout);
+    } catch (const lic::InputError& e) {
+        throw lic::Error("cannot write " + quote(path) + ": the file written is incomplete (disk full?): "
+                         + e.what());
+    }
+    openvdb::io::File check(tmp);
+    check.open(/*delayLoad=*/false);
+    const auto written = check.readAllGridMetadata();
+    check.close();
+    if (!written || written->size() != gridCount)
+        throw lic::Error("cannot write " + quote(path) + ": only " + std::to_string(written ? written->size() : 0)
+                         + " of " + std::to_string(gridCount) + " grids could be read back");
+}
+
+} // namespace
+
 OutputSet::Pending OutputSet::writeVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)
 {
     openvdb::initialize();
@@ -695,22 +720,26 @@ OutputSet::Pending OutputSet::writeVdb(const std::string& path, openvdb::GridPtr
         }
         detail::writeVdbFile(tmp, openvdb::GridCPtrVec(grids.begin(), grids.end()), fileMetadata);
         // io::File does not report stream errors after opening (e.g. a full disk): check the
-        // structure of what was written and read the headers back.
-        try {
-            checkVdbStructure(tmp, VdbCheckDepth::Layout);
-        } catch (const lic::InputError& e) {
-            throw lic::Error("cannot write " + quote(path) + ": the file written is incomplete (disk full?): "
-                             + e.what());
-        }
-        openvdb::io::File check(tmp);
-        check.open(/*delayLoad=*/false);
-        const auto written = check.readAllGridMetadata();
-        check.close();
-        if (!written || written->size() != grids.size())
-            throw lic::Error("cannot write " + quote(path) + ": only "
-                             + std::to_string(written ? written->size() : 0) + " of "
-                             + std::to_string(grids.size()) + " grids could be read back");
-        finish(f);
+        // structure of what was written and read the headers back. Beside it, the file is flushed
+        // and hashed (finish); a failed check is reported first.
+        std::exception_ptr checkFailed, finishFailed;
+        tbb::parallel_invoke(
+            [&] {
+                try {
+                    checkWritten(path, tmp, grids.size());
+                } catch (...) {
+                    checkFailed = std::current_exception();
+                }
+            },
+            [&] {
+                try {
+                    finish(f);
+                } catch (...) {
+                    finishFailed = std::current_exception();
+                }
+            });
+        if (checkFailed) std::rethrow_exception(checkFailed);
+        if (finishFailed) std::rethrow_exception(finishFailed);
     } catch (const lic::Error&) {
         discard(f);
         throw;

@@ -1,23 +1,32 @@
-// A .vdb file's grids written side by side (detail::writeVdbFile).
+// A .vdb file written with every leaf compressed once, on every core (detail::writeVdbFile).
 //
-// openvdb::io::File::write writes a file's grids one after another, and each grid's record is made
-// on one thread: its leaves are compressed twice (once to size the delayed-load table, once to
-// write them), leaf after leaf. For a spot bake's two grids (density and halo) that is the whole
-// of its write stage, ~0.7 s serial for the figure-12 set. Here every grid's record is made by
-// OpenVDB's own io::Archive::writeGrid, on its own task: the first straight into the file, the
-// others into memory, and those are appended in order. writeGrid records three stream positions
-// in the grid's descriptor (grid, blocks, end) from the stream it writes to; in a buffer they are
-// relative to the buffer's start, so they are moved by the buffer's place in the file. The rest of
-// a record holds sizes, not positions. The bytes are io::File::write's but for the file's random
-// UUID (tests/unit/test_vdbio.cpp compares them).
+// openvdb::io::Archive::writeGrid makes a grid's record on one thread, and compresses each leaf
+// twice: once (in parallel) only to learn its compressed size for the delayed-load table in the
+// grid's metadata, then again (serially, leaf after leaf) to write it. For a bake that is most of
+// its write stage. Here a float or Vec3f grid's record is made as writeGrid makes it, step for
+// step, but its leaves' bytes come first: each leaf's own LeafNode::writeBuffers writes into a
+// chunk of leaves in memory, chunks on all cores, and the delayed-load table is read off those
+// bytes (the size of each leaf's compressed block and its mask-compression kind). Then the
+// metadata, transform and topology are written by OpenVDB as usual, then the chunks in order.
+// A grid too big to hold compressed in memory is compressed twice after all, both passes on all
+// cores: the first keeps only the table, the second streams the chunks to the file in order.
+// Other grid types, and files whose names Archive would change or whose grids share a tree, are
+// written by OpenVDB itself. The bytes are io::File::write's but for the file's random UUID
+// (tests/unit/test_vdbio.cpp compares them); the record layout followed here is the same in
+// OpenVDB 10 to 13.
 #include "vdbexport/io/VdbIO.h"
 
 #include <lic/util/Error.h>
 
+#include <openvdb/io/Compression.h>
+#include <openvdb/io/DelayedLoadMetadata.h>
 #include <openvdb/io/GridDescriptor.h>
 #include <openvdb/io/io.h>
+#include <openvdb/tree/LeafManager.h>
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -26,85 +35,125 @@
 #include <fstream>
 #include <set>
 #include <sstream>
-#include <streambuf>
 
 namespace vdbexport::detail {
 
 namespace {
 
-/// Grids whose records are held in memory at once, at most (in-memory size): a bigger file is
-/// written by io::File::write, one grid at a time, without the extra copy.
-constexpr openvdb::Index64 kSideBySideBytes = openvdb::Index64(256) << 20;
+namespace io = openvdb::io;
 
-/// A grid's record in memory: an output stream buffer over a string, reserved up front (the grid's
-/// in-memory size bounds its compressed record, so the string does not grow by doubling and only
-/// the bytes written are touched) and seekable within what is written (writeGrid goes back to
-/// rewrite the descriptor's positions).
-class RecordBuffer : public std::streambuf
+/// Leaves per chunk: a chunk is one task's work and one string (~80 KiB for dense float leaves).
+constexpr std::size_t kChunkLeaves = 64;
+
+/// A run of consecutive leaves' records (LeafNode::writeBuffers), and per leaf what the
+/// delayed-load table holds: the mask-compression kind and the compressed block's size.
+struct Chunk
+{
+    std::string bytes;
+    std::vector<std::int8_t> masks;
+    std::vector<std::int64_t> sizes;
+};
+
+/// One grid's leaves, compressed a chunk at a time with the stream state writeBuffers sees.
+template<typename GridT>
+class LeafRecords
 {
 public:
-    explicit RecordBuffer(std::size_t reserve) { mBytes.reserve(reserve); }
-    std::string take() { return std::move(mBytes); }
+    using TreeT = typename GridT::TreeType;
+    using LeafT = typename TreeT::LeafNodeType;
+    using ValueT = typename TreeT::ValueType;
+    using MaskT = typename LeafT::NodeMaskType;
 
-protected:
-    std::streamsize xsputn(const char* s, std::streamsize n) override
+    LeafRecords(const GridT& grid, std::uint32_t compression, bool sizes)
+        : mLeaves(grid.constTree())
+        , mBackground(grid.constTree().background())
+        , mCompression(compression)
+        , mSizes(sizes)
+        , mHalf(grid.saveFloatAsHalf())
     {
-        const std::size_t count = std::size_t(n), over = std::min(count, mBytes.size() - mPos);
-        mBytes.replace(mPos, over, s, over);
-        mBytes.append(s + over, count - over);
-        mPos += count;
-        return n;
     }
-    int_type overflow(int_type c) override
+
+    std::size_t leafCount() const { return mLeaves.leafCount(); }
+    std::size_t chunkCount() const { return (leafCount() + kChunkLeaves - 1) / kChunkLeaves; }
+
+    Chunk make(std::size_t c) const
     {
-        if (traits_type::eq_int_type(c, traits_type::eof())) return traits_type::not_eof(c);
-        const char ch = traits_type::to_char_type(c);
-        xsputn(&ch, 1);
-        return c;
-    }
-    pos_type seekoff(off_type off, std::ios_base::seekdir dir, std::ios_base::openmode which) override
-    {
-        const off_type base = dir == std::ios_base::beg ? 0 : dir == std::ios_base::cur ? off_type(mPos) : off_type(mBytes.size());
-        const off_type to = base + off;
-        if (!(which & std::ios_base::out) || to < 0 || to > off_type(mBytes.size())) return pos_type(off_type(-1));
-        mPos = std::size_t(to);
-        return pos_type(to);
-    }
-    pos_type seekpos(pos_type pos, std::ios_base::openmode which) override
-    {
-        return seekoff(off_type(pos), std::ios_base::beg, which);
+        const std::size_t begin = c * kChunkLeaves, end = std::min(leafCount(), begin + kChunkLeaves);
+        Chunk out;
+        std::ostringstream os(std::ios::out | std::ios::binary);
+        io::setDataCompression(os, mCompression);
+        io::setGridBackgroundValuePtr(os, &mBackground);
+        for (std::size_t i = begin; i < end; ++i) {
+            const LeafT& leaf = mLeaves.leaf(i);
+            const auto at = std::size_t(os.tellp());
+            leaf.writeBuffers(os, mHalf);
+            // As Archive's populateDelayedLoadMetadata: the kind from the tree's background.
+            out.masks.push_back(io::MaskCompress<ValueT, MaskT>(leaf.valueMask(), MaskT(), leaf.buffer().data(),
+                                                                 mBackground).metadata);
+            if (mSizes) out.sizes.push_back(blockSize(os, at));
+        }
+        if (!os) throw lic::Error("could not compress a grid's leaves");
+        out.bytes = std::move(os).str();
+        return out;
     }
 
 private:
-    std::string mBytes;
-    std::size_t mPos = 0; ///< where the next byte goes (≤ size: writeGrid seeks back, then to the end)
+    /// The compressed block's size plus its 8-byte count, read off the leaf's record written from
+    /// `at`: the value mask, the mask-compression kind, its inactive values and selection mask,
+    /// then the block's count (negative: stored uncompressed) and bytes.
+    static std::int64_t blockSize(std::ostringstream& os, std::size_t at)
+    {
+        const std::string_view bytes = os.view();
+        std::size_t p = at + sizeof(typename MaskT::Word) * MaskT::WORD_COUNT;
+        if (p >= bytes.size()) throw lic::Error("a leaf's record is shorter than its value mask");
+        const auto kind = std::int8_t(bytes[p++]);
+        if (kind == io::NO_MASK_AND_ONE_INACTIVE_VAL || kind == io::MASK_AND_ONE_INACTIVE_VAL) p += sizeof(ValueT);
+        if (kind == io::MASK_AND_TWO_INACTIVE_VALS) p += 2 * sizeof(ValueT);
+        if (kind == io::MASK_AND_NO_INACTIVE_VALS || kind == io::MASK_AND_ONE_INACTIVE_VAL ||
+            kind == io::MASK_AND_TWO_INACTIVE_VALS)
+            p += sizeof(typename MaskT::Word) * MaskT::WORD_COUNT;
+        std::int64_t count = 0;
+        if (p + sizeof count > bytes.size()) throw lic::Error("a leaf's record is shorter than its layout");
+        std::memcpy(&count, bytes.data() + p, sizeof count);
+        const std::int64_t block = count < 0 ? -count : count;
+        if (p + sizeof count + std::size_t(block) != bytes.size())
+            throw lic::Error("a leaf's record does not end with its compressed block");
+        return block + std::int64_t(sizeof count);
+    }
+
+    openvdb::tree::LeafManager<const TreeT> mLeaves;
+    const ValueT mBackground;
+    std::uint32_t mCompression;
+    bool mSizes;
+    bool mHalf;
 };
 
-/// io::Archive's writer with the grids' records made side by side (see the file comment).
-class SideBySideArchive : public openvdb::io::Archive
+/// io::Archive's writer with each float or Vec3f grid's leaves compressed once, in parallel.
+class ParallelArchive : public io::Archive
 {
 public:
-    /// False (and nothing written) when io::File::write must be used instead: fewer than two
-    /// grids, a name that Archive would change (empty or repeated), a tree shared by two grids
-    /// (an instance), or records too big to hold in memory.
+    using Fast = openvdb::TypeList<openvdb::FloatGrid, openvdb::Vec3SGrid>;
+
+    explicit ParallelArchive(std::uint64_t holdBytes)
+        : mHoldBytes(holdBytes)
+    {
+    }
+
+    /// False when io::File::write must write the grids: a null grid, a name that Archive would
+    /// change (empty or repeated), or a tree shared by two grids (an instance).
     static bool suits(const openvdb::GridCPtrVec& grids)
     {
-        if (grids.size() < 2) return false;
         std::set<std::string> names;
         std::set<const openvdb::TreeBase*> trees;
-        openvdb::Index64 bytes = 0;
-        for (std::size_t i = 0; i < grids.size(); ++i) {
-            const auto& g = grids[i];
+        for (const auto& g : grids) {
             if (!g || g->getName().empty() || !names.insert(g->getName()).second) return false;
             if (!trees.insert(&g->baseTree()).second) return false;
-            if (i > 0) bytes += g->memUsage();
         }
-        return bytes <= kSideBySideBytes;
+        return true;
     }
 
     void write(std::ostream& file, const openvdb::GridCPtrVec& grids, const openvdb::MetaMap& metadata) const
     {
-        namespace io = openvdb::io;
         // The file-level stream state, as Archive::write sets it.
         io::StreamMetadata::Ptr streamMetadata = std::make_shared<io::StreamMetadata>();
         io::setStreamMetadataPtr(file, streamMetadata, /*transfer=*/false);
@@ -114,59 +163,125 @@ public:
         metadata.writeMeta(file);
         const std::int32_t count = std::int32_t(grids.size());
         file.write(reinterpret_cast<const char*>(&count), sizeof count);
-
-        // Grid 0 into the file, the others into buffers with the same stream state.
-        const std::size_t n = grids.size();
-        std::vector<std::string> records(n);
-        std::vector<std::int64_t> offsetPos(n, 0);
-        std::vector<io::GridDescriptor> descriptors;
-        for (const auto& g : grids) descriptors.emplace_back(g->getName(), g->type(), g->saveFloatAsHalf());
-        tbb::parallel_for(std::size_t(0), n, [&](std::size_t i) {
-            if (i == 0) {
-                writeGrid(descriptors[0], grids[0], file, /*seekable=*/true);
-                return;
-            }
-            RecordBuffer buffer(std::size_t(grids[i]->memUsage()) + (std::size_t(1) << 16));
-            std::ostream os(&buffer);
-            // (The stream keeps a pointer to this shared pointer: it must outlive the writes.)
-            io::StreamMetadata::Ptr meta = std::make_shared<io::StreamMetadata>(*streamMetadata);
-            io::setStreamMetadataPtr(os, meta, /*transfer=*/false);
-            io::setDataCompression(os, compression());
-            io::setWriteGridStatsMetadata(os, isGridStatsMetadataEnabled());
-            std::ostringstream header(std::ios::out | std::ios::binary);
-            descriptors[i].writeHeader(header);
-            offsetPos[i] = std::int64_t(header.tellp()); // where writeGrid puts the positions
-            writeGrid(descriptors[i], grids[i], os, /*seekable=*/true);
-            if (!os) throw lic::Error("could not make the record of grid '" + grids[i]->getName() + "'");
-            records[i] = buffer.take();
-        });
-        if (!file) return; // the caller checks the stream
-
-        // Append the buffers, each descriptor's positions moved by where its buffer lands.
-        for (std::size_t i = 1; i < n; ++i) {
-            const std::int64_t base = std::int64_t(file.tellp());
-            io::GridDescriptor& gd = descriptors[i];
-            gd.setGridPos(gd.getGridPos() + base);
-            gd.setBlockPos(gd.getBlockPos() + base);
-            gd.setEndPos(gd.getEndPos() + base);
-            std::ostringstream pos(std::ios::out | std::ios::binary);
-            gd.writeStreamPos(pos);
-            const std::string p = std::move(pos).str();
-            std::string& r = records[i];
-            if (offsetPos[i] < 0 || std::size_t(offsetPos[i]) + p.size() > r.size())
-                throw lic::Error("the record of grid '" + grids[i]->getName() + "' is shorter than its descriptor");
-            std::memcpy(r.data() + offsetPos[i], p.data(), p.size());
-            file.write(r.data(), std::streamsize(r.size()));
-            std::string().swap(r); // free it as soon as it is written
+        for (const auto& grid : grids) {
+            io::GridDescriptor gd(grid->getName(), grid->type(), grid->saveFloatAsHalf());
+            const bool done =
+                sizesAsOpenVdb() && grid->apply<Fast>([&](const auto& g) { writeRecord(gd, g, file, streamMetadata); });
+            if (!done) writeGrid(gd, grid, file, /*seekable=*/true);
+            if (!file) return; // the caller checks the stream
         }
     }
+
+private:
+    /// Archive sizes the delayed-load table with its own compression flags and writes the leaves
+    /// with the grid's (no ZIP for fog volumes and level sets): the sizes read off the written
+    /// leaves are the table's when Blosc decides both, or when neither compresses.
+    bool sizesAsOpenVdb() const
+    {
+        const std::uint32_t c = compression();
+        return (c & io::COMPRESS_BLOSC) || !(c & io::COMPRESS_ZIP);
+    }
+
+    /// Archive::writeGrid's steps, with the leaves compressed first (see the file comment).
+    /// `fileMeta` is the file's stream metadata, which `os` points at (and is left pointing at).
+    template<typename GridT>
+    void writeRecord(io::GridDescriptor& gd, const GridT& grid, std::ostream& os,
+                     io::StreamMetadata::Ptr& fileMeta) const
+    {
+        // Stream metadata varies per grid: a copy of the file's. (The stream keeps a pointer to
+        // the shared pointer: it must outlive the writes.)
+        io::StreamMetadata::Ptr meta = std::make_shared<io::StreamMetadata>(*fileMeta);
+        meta->setHalfFloat(grid.saveFloatAsHalf());
+        meta->gridMetadata() = static_cast<const openvdb::MetaMap&>(grid);
+        io::setStreamMetadataPtr(os, meta, /*transfer=*/false);
+
+        gd.writeHeader(os);
+        const std::int64_t offsetPos = std::int64_t(os.tellp());
+        gd.writeStreamPos(os); // positions not known yet: rewritten at the end
+        gd.setGridPos(os.tellp());
+        setGridCompression(os, grid);
+
+        const bool sizes = compression() & (io::COMPRESS_BLOSC | io::COMPRESS_ZIP);
+        const LeafRecords<GridT> leaves(grid, io::getDataCompression(os), sizes);
+        const std::size_t n = leaves.leafCount(), chunks = leaves.chunkCount();
+        const bool hold = grid.memUsage() <= mHoldBytes;
+        std::vector<Chunk> made(chunks);
+        tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+            made[c] = leaves.make(c);
+            if (!hold) std::string().swap(made[c].bytes); // streamed again below
+        });
+
+        // The grid's metadata with the delayed-load table, as writeGrid adds it.
+        const auto copy = openvdb::ConstPtrCast<openvdb::GridBase>(grid.copyGrid()); // shallow
+        auto table = std::make_shared<io::DelayedLoadMetadata>();
+        if (n > 0) {
+            table->resizeMask(n);
+            if (sizes) table->resizeCompressedSize(n);
+            for (std::size_t c = 0, i = 0; c < chunks; ++c)
+                for (std::size_t k = 0; k < made[c].masks.size(); ++k, ++i) {
+                    table->setMask(i, made[c].masks[k]);
+                    if (sizes) table->setCompressedSize(i, made[c].sizes[k]);
+                }
+        }
+        copy->insertMeta(openvdb::GridBase::META_FILE_DELAYED_LOAD, *table);
+        if (io::getWriteGridStatsMetadata(os)) {
+            copy->addStatsMetadata();
+            copy->insertMeta(openvdb::GridBase::META_FILE_COMPRESSION,
+                             openvdb::StringMetadata(io::compressionToString(io::getDataCompression(os))));
+        }
+        copy->writeMeta(os);
+        grid.writeTransform(os);
+        grid.writeTopology(os);
+        gd.setBlockPos(os.tellp());
+
+        if (hold) {
+            for (Chunk& c : made) {
+                os.write(c.bytes.data(), std::streamsize(c.bytes.size()));
+                std::string().swap(c.bytes);
+            }
+        } else {
+            streamChunks(leaves, os);
+        }
+        gd.setEndPos(os.tellp());
+        os.seekp(offsetPos, std::ios_base::beg);
+        gd.writeStreamPos(os);
+        gd.seekToEnd(os);
+        io::setStreamMetadataPtr(os, fileMeta, /*transfer=*/false);
+    }
+
+    /// The chunks made again on all cores and written in order, a few in flight at a time.
+    template<typename GridT>
+    static void streamChunks(const LeafRecords<GridT>& leaves, std::ostream& os)
+    {
+        const std::size_t chunks = leaves.chunkCount();
+        const auto tokens = std::size_t(2 * std::max(1, tbb::this_task_arena::max_concurrency()));
+        std::size_t next = 0;
+        tbb::parallel_pipeline(
+            tokens,
+            tbb::make_filter<void, std::size_t>(tbb::filter_mode::serial_in_order,
+                                                [&](tbb::flow_control& fc) -> std::size_t {
+                                                    if (next == chunks) {
+                                                        fc.stop();
+                                                        return 0;
+                                                    }
+                                                    return next++;
+                                                })
+                & tbb::make_filter<std::size_t, std::string>(
+                    tbb::filter_mode::parallel, [&](std::size_t c) { return leaves.make(c).bytes; })
+                & tbb::make_filter<std::string, void>(tbb::filter_mode::serial_in_order, [&](const std::string& bytes) {
+                      os.write(bytes.data(), std::streamsize(bytes.size()));
+                  }));
+    }
+
+    std::uint64_t mHoldBytes;
 };
 
 } // namespace
 
-void writeVdbFile(const std::string& path, const openvdb::GridCPtrVec& grids, const openvdb::MetaMap& fileMetadata)
+void writeVdbFile(const std::string& path, const openvdb::GridCPtrVec& grids, const openvdb::MetaMap& fileMetadata,
+                  std::uint64_t holdBytes)
 {
-    if (!SideBySideArchive::suits(grids)) {
+    if (!ParallelArchive::suits(grids)) {
         openvdb::io::File file(path);
         file.write(grids, fileMetadata);
         file.close();
@@ -174,7 +289,7 @@ void writeVdbFile(const std::string& path, const openvdb::GridCPtrVec& grids, co
     }
     std::ofstream file(path, std::ios::out | std::ios::binary | std::ios::trunc);
     if (!file) throw lic::Error("cannot write '" + path + "' (" + std::strerror(errno) + ")");
-    SideBySideArchive().write(file, grids, fileMetadata);
+    ParallelArchive(holdBytes).write(file, grids, fileMetadata);
     file.close();
 }
 

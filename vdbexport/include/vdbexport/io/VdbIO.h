@@ -137,14 +137,20 @@ std::string prepareAtomicWrite(const std::string& path);
 /// O_TMPFILE cannot remove its named temporary; the next write of the same path does.
 void removeStaleTemporaries(const std::string& path);
 
+/// Grids whose compressed leaves writeVdbFile holds in memory (in-memory size, at most): a bigger
+/// grid's leaves are compressed twice, both times on all cores, and streamed to the file.
+constexpr std::uint64_t kWriteHoldBytes = std::uint64_t(256) << 20;
+
 /// Write `grids` and the file metadata to `path` as openvdb::io::File::write does, byte for byte
-/// but for the file's random UUID, with the grids' records made side by side, one task per grid
-/// (src/io/VdbWrite.cpp). Falls back to io::File::write for a single grid, names Archive would
-/// change (empty or repeated), trees shared by grids (instances), and when the grids after the
-/// first hold over 256 MiB in memory (their records are held in memory until appended).
+/// but for the file's random UUID, with each float and Vec3f grid's leaves compressed once and on
+/// every core (src/io/VdbWrite.cpp); grids over `holdBytes` are compressed twice, as OpenVDB does,
+/// but on every core. Falls back to io::File::write for a null grid, names Archive would change
+/// (empty or repeated) and trees shared by grids (instances); other grid types are written by
+/// OpenVDB's own io::Archive::writeGrid within the file.
 /// Errors as io::File::write's (openvdb exceptions, lic::Error); a short write is the caller's
 /// to find (OutputSet::writeVdb checks the structure written).
-void writeVdbFile(const std::string& path, const openvdb::GridCPtrVec& grids, const openvdb::MetaMap& fileMetadata);
+void writeVdbFile(const std::string& path, const openvdb::GridCPtrVec& grids, const openvdb::MetaMap& fileMetadata,
+                  std::uint64_t holdBytes = kWriteHoldBytes);
 
 /// Flush `tmp` to disk, then rename it over `path`. Removes `tmp` and throws lic::Error on failure.
 void commitAtomicWrite(const std::string& tmp, const std::string& path);
