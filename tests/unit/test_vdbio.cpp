@@ -572,7 +572,7 @@ TEST_F(VdbIOTest, ParallelWriteGivesTheBytesOfOpenVdbsWriter)
             ASSERT_EQ(back->size(), n);
             for (std::size_t i = 0; i < n; ++i) {
                 const auto g = std::find_if(back->begin(), back->end(),
-                                            [&](const auto& b) { return b->getName() == some[i]->getName(); });
+                                            [&](const auto& read) { return read->getName() == some[i]->getName(); });
                 ASSERT_NE(g, back->end()) << what << ": " << some[i]->getName();
                 EXPECT_EQ((*g)->activeVoxelCount(), some[i]->activeVoxelCount()) << what;
             }
