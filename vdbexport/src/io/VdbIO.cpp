@@ -723,21 +723,17 @@ OutputSet::Pending OutputSet::writeVdb(const std::string& path, openvdb::GridPtr
         // structure of what was written and read the headers back. Beside it, the file is flushed
         // and hashed (finish); a failed check is reported first.
         std::exception_ptr checkFailed, finishFailed;
-        tbb::parallel_invoke(
-            [&] {
+        const auto keeping = [](std::exception_ptr& failed, auto work) {
+            return [&failed, work] {
                 try {
-                    checkWritten(path, tmp, grids.size());
+                    work();
                 } catch (...) {
-                    checkFailed = std::current_exception();
+                    failed = std::current_exception();
                 }
-            },
-            [&] {
-                try {
-                    finish(f);
-                } catch (...) {
-                    finishFailed = std::current_exception();
-                }
-            });
+            };
+        };
+        tbb::parallel_invoke(keeping(checkFailed, [&] { checkWritten(path, tmp, grids.size()); }),
+                             keeping(finishFailed, [&] { finish(f); }));
         if (checkFailed) std::rethrow_exception(checkFailed);
         if (finishFailed) std::rethrow_exception(finishFailed);
     } catch (const lic::Error&) {

@@ -35,6 +35,7 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <utility>
 
 namespace vdbexport::detail {
 
@@ -87,10 +88,14 @@ public:
             const LeafT& leaf = mLeaves.leaf(i);
             const auto at = std::size_t(os.tellp());
             leaf.writeBuffers(os, mHalf);
-            // As Archive's populateDelayedLoadMetadata: the kind from the tree's background.
-            out.masks.push_back(io::MaskCompress<ValueT, MaskT>(leaf.valueMask(), MaskT(), leaf.buffer().data(),
-                                                                 mBackground).metadata);
-            if (mSizes) out.sizes.push_back(blockSize(os, at));
+            const auto [kind, size] = parse(os, at);
+            // Archive's populateDelayedLoadMetadata computes the kind from the tree's background
+            // whatever the flags; with mask compression on, the record holds that same kind.
+            out.masks.push_back(mCompression & io::COMPRESS_ACTIVE_MASK
+                                    ? kind
+                                    : io::MaskCompress<ValueT, MaskT>(leaf.valueMask(), MaskT(), leaf.buffer().data(),
+                                                                      mBackground).metadata);
+            if (mSizes) out.sizes.push_back(size);
         }
         if (!os) throw lic::Error("could not compress a grid's leaves");
         out.bytes = std::move(os).str();
@@ -98,10 +103,10 @@ public:
     }
 
 private:
-    /// The compressed block's size plus its 8-byte count, read off the leaf's record written from
-    /// `at`: the value mask, the mask-compression kind, its inactive values and selection mask,
-    /// then the block's count (negative: stored uncompressed) and bytes.
-    static std::int64_t blockSize(std::ostringstream& os, std::size_t at)
+    /// The mask-compression kind, and the compressed block's size plus its 8-byte count, read off
+    /// the leaf's record written from `at`: the value mask, the kind, its inactive values and
+    /// selection mask, then the block's count (negative: stored uncompressed) and bytes.
+    static std::pair<std::int8_t, std::int64_t> parse(std::ostringstream& os, std::size_t at)
     {
         const std::string_view bytes = os.view();
         std::size_t p = at + sizeof(typename MaskT::Word) * MaskT::WORD_COUNT;
@@ -118,7 +123,7 @@ private:
         const std::int64_t block = count < 0 ? -count : count;
         if (p + sizeof count + std::size_t(block) != bytes.size())
             throw lic::Error("a leaf's record does not end with its compressed block");
-        return block + std::int64_t(sizeof count);
+        return {kind, block + std::int64_t(sizeof count)};
     }
 
     openvdb::tree::LeafManager<const TreeT> mLeaves;
