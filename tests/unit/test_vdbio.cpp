@@ -4,6 +4,7 @@
 
 #include "vdbexport/io/Info.h"
 #include "vdbexport/io/VdbIO.h"
+#include "io/VdbGridReader.h"
 
 #include <lic/util/Error.h>
 
@@ -764,4 +765,97 @@ TEST_F(VdbIOTest, FormatInfoOfFileWithoutGrids)
     EXPECT_TRUE(d["grids"].empty());
     EXPECT_CONTAINS(formatInfo(d), "no grids");
     EXPECT_CONTAINS(inputErrorOf([&] { readVelocityGrid(path); }), "no Vec3 grid");
+}
+
+namespace {
+
+/// Every value and active state of `a` and `b` (grids of type GridT) are the same, tiles included.
+template<typename GridT>
+void expectSameValues(const openvdb::GridBase& a, const openvdb::GridBase& b, const std::string& what)
+{
+    const auto& ta = static_cast<const GridT&>(a).tree();
+    const auto& tb = static_cast<const GridT&>(b).tree();
+    EXPECT_TRUE(ta.hasSameTopology(tb)) << what;
+    EXPECT_EQ(ta.background(), tb.background()) << what;
+    EXPECT_EQ(ta.leafCount(), tb.leafCount()) << what;
+    std::size_t n = 0;
+    for (auto it = ta.cbeginValueAll(); it; ++it, ++n) {
+        typename GridT::ValueType v;
+        const bool on = tb.probeValue(it.getCoord(), v);
+        ASSERT_EQ(on, it.isValueOn()) << what << " at " << it.getCoord();
+        ASSERT_EQ(v, *it) << what << " at " << it.getCoord();
+    }
+    EXPECT_GT(n, 0u) << what;
+}
+
+/// What io::File reads and what GridFileReader reads are the same grid: type, name, class,
+/// half-float flag, metadata, transform, and every value.
+void expectSameGrid(const openvdb::GridBase::Ptr& want, const openvdb::GridBase::Ptr& got, const std::string& what)
+{
+    ASSERT_TRUE(want) << what;
+    ASSERT_TRUE(got) << what;
+    ASSERT_EQ(got->type(), want->type()) << what;
+    EXPECT_EQ(got->getName(), want->getName()) << what;
+    EXPECT_EQ(got->getGridClass(), want->getGridClass()) << what;
+    EXPECT_EQ(got->saveFloatAsHalf(), want->saveFloatAsHalf()) << what;
+    EXPECT_EQ(static_cast<const openvdb::MetaMap&>(*got).str(), static_cast<const openvdb::MetaMap&>(*want).str()) << what;
+    EXPECT_TRUE(got->constTransform() == want->constTransform()) << what;
+    if (want->isType<openvdb::FloatGrid>()) expectSameValues<openvdb::FloatGrid>(*want, *got, what);
+    else if (want->isType<openvdb::Vec3SGrid>()) expectSameValues<openvdb::Vec3SGrid>(*want, *got, what);
+    else if (want->isType<openvdb::DoubleGrid>()) expectSameValues<openvdb::DoubleGrid>(*want, *got, what);
+    else ADD_FAILURE() << what << ": a grid type this test does not compare: " << want->type();
+}
+
+} // namespace
+
+// VdbReader reads grids through GridFileReader (a stream over pread, not io::File's ifstream):
+// what it reads must be what io::File reads, grid by grid and all at once, for every kind of grid
+// a file holds (half floats, vectors, doubles, a level set, tiles, repeated names, an instance).
+TEST_F(VdbIOTest, GridReaderReadsWhatOpenVdbsFileReads)
+{
+    auto tiles = noisyGrid<openvdb::FloatGrid>("tiles", 3, false, 5);
+    tiles->tree().addTile(2, openvdb::Coord(4096, 0, 0), 2.5f, true); // an active 128³ tile
+    tiles->tree().addTile(1, openvdb::Coord(0, 4096, 0), 0.5f, false);
+    auto levelSet = noisyGrid<openvdb::FloatGrid>("distance", 3, false, 7);
+    levelSet->setGridClass(openvdb::GRID_LEVEL_SET);
+    auto instance = noisyGrid<openvdb::FloatGrid>("shared", 1, false, 6);
+    instance->setTree(tiles->treePtr()); // written as an instance of "tiles"
+    instance->setTransform(openvdb::math::Transform::createLinearTransform(0.25));
+    auto big = noisyGrid<openvdb::Vec3SGrid>("velocity", 400, false, 3); // > 1 MiB: reads past the window
+    const openvdb::GridCPtrVec grids{noisyGrid<openvdb::FloatGrid>("density", 30, false, 1),
+                                     noisyGrid<openvdb::FloatGrid>("density", 12, true, 2), // "density[1]"
+                                     big, tiles, instance, levelSet,
+                                     noisyGrid<openvdb::Vec3SGrid>("tangent", 5, true, 8),
+                                     noisyGrid<openvdb::DoubleGrid>("temperature", 4, false, 9)};
+    const std::string path = file("many.vdb");
+    openvdb::io::File(path).write(grids);
+
+    openvdb::io::File ref(path);
+    ref.open(/*delayLoad=*/false);
+    vdbexport::detail::GridFileReader ours(path);
+    ASSERT_TRUE(ours.random());
+    for (const std::string name : {"density", "density[0]", "density[1]", "velocity", "tiles", "shared",
+                                   "distance", "tangent", "temperature"})
+        expectSameGrid(ref.readGrid(name), ours.readGrid(name), name);
+    EXPECT_THROW(ours.readGrid("missing"), openvdb::KeyError);
+    EXPECT_THROW(ours.readGrid("density[5]"), openvdb::KeyError);
+
+    const auto want = ref.getGrids();
+    const openvdb::GridPtrVec got = ours.readAllGrids();
+    ASSERT_EQ(got.size(), want->size());
+    for (std::size_t i = 0; i < got.size(); ++i) expectSameGrid((*want)[i], got[i], "all grids, #" + std::to_string(i));
+    const auto byName = [](const openvdb::GridPtrVec& v, const std::string& n) {
+        return *std::find_if(v.begin(), v.end(), [&](const auto& g) { return g->getName() == n; });
+    };
+    EXPECT_EQ(&byName(got, "shared")->baseTree(), &byName(got, "tiles")->baseTree()) << "the instance shares its parent's tree";
+    ref.close();
+
+    // Through VdbReader (after the structural check), as every read path takes it.
+    vdbexport::detail::VdbReader reader(path);
+    expectSameGrid(byName(*want, "velocity"), reader.readGrid("velocity"), "VdbReader velocity");
+    EXPECT_EQ(reader.readAllGrids().size(), want->size());
+
+    const std::string text = file("not.vdb");
+    std::ofstream(text) << "plainly not a VDB file, but long enough to hold a header's bytes";
+    EXPECT_THROW(vdbexport::detail::GridFileReader{text}, openvdb::IoError);
 }

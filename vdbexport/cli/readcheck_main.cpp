@@ -1,11 +1,11 @@
 // licvdb-readcheck: layer 2 of the .vdb read defences (docs/inputs.md) as a program of its own.
-// `licvdb-readcheck -- FILE` runs layer 1 (the structural walk) and then reads and describes every
-// grid with OpenVDB, in this process: it is what `licvdb` starts as the child of every .vdb read,
+// `licvdb-readcheck -- FILE` runs layer 1 (the structural walk) and then reads the file's
+// metadata, grid headers and every grid with OpenVDB, through VdbReader as licvdb reads them, in
+// this process: it is what `licvdb` starts as the child of every .vdb read,
 // so that whatever a file does to OpenVDB's reader (a crash, a hang) stays out of the bake. It
 // links OpenVDB and its own read code only (20 shared libraries; licvdb links 27, MPI among them,
 // and loads OpenImageIO and VTK only when it needs them), so it starts sooner than `licvdb`.
 // Exit 0: intact; 2: refused, with "licvdb-readcheck: error: REASON" on stderr; 1: another failure.
-#include "vdbexport/io/Info.h"
 #include "vdbexport/io/VdbCheck.h"
 #include "vdbexport/io/VdbIO.h"
 
@@ -29,7 +29,12 @@ int main(int argc, char** argv)
     try {
         openvdb::initialize();
         (void)vdbexport::detail::checkedVdb(path);
-        (void)vdbexport::describeVdb(path);
+        // What licvdb's reads do with the file (the grids' descriptions, value ranges and the
+        // like, are worked out on grids already read: nothing of the file's left to check).
+        vdbexport::detail::VdbReader reader(path);
+        (void)reader.fileMetadata();
+        (void)reader.gridTypes();
+        (void)reader.readAllGrids();
         return 0;
     } catch (const lic::InputError& e) {
         std::cerr << who << ": error: " << e.what() << "\n";

@@ -126,6 +126,8 @@ private:
 
 namespace detail {
 
+class GridFileReader; // src/io/VdbGridReader.h
+
 /// Check that `path` names a file we may create: its directory exists and is writable, and
 /// `path` itself is not a directory. Returns the temporary name to write first (then
 /// commitAtomicWrite). Shared by the VDB, text and image writers.
@@ -194,6 +196,7 @@ private:
     std::string mPath;
     VdbCheckResult mCheck;
     std::unique_ptr<openvdb::io::File> mFile;
+    std::unique_ptr<GridFileReader> mGrids; ///< the grid reads (null: io::File's)
 };
 
 /// OpenVDB before 13 writes a warning on stderr ("unsupported VDB file format") when it opens a
