@@ -4,6 +4,7 @@
 
 #include <tbb/parallel_for.h>
 
+#include <array>
 #include <sstream>
 
 namespace lic {
@@ -87,12 +88,20 @@ void OutputDomain::init(const openvdb::math::Transform& fieldTransform, const op
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nBlocks), [&](const auto& r) {
         auto acc = grid.getConstAccessor();
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
+            // The field voxel of each of the block's 8 coordinates per axis, and whether it is in the box.
             const openvdb::Coord origin = originOf(b);
+            std::array<std::array<int, 8>, 3> f;
+            std::array<std::array<bool, 8>, 3> in;
+            for (int a = 0; a < 3; ++a)
+                for (int i = 0; i < 8; ++i) {
+                    const int c = origin[a] + i;
+                    in[a][i] = c >= mBBox.min()[a] && c <= mBBox.max()[a];
+                    f[a][i] = detail::floorDiv(c, K);
+                }
             for (int off = 0; off < kBlockVoxels; ++off) {
-                const openvdb::Coord ijk = origin + openvdb::Coord(off >> 6, (off >> 3) & 7, off & 7);
-                if (!mBBox.isInside(ijk)) continue;
-                const openvdb::Coord f(detail::floorDiv(ijk[0], K), detail::floorDiv(ijk[1], K), detail::floorDiv(ijk[2], K));
-                if (acc.isValueOn(f)) masks[b].setOn(openvdb::Index(off));
+                const int x = off >> 6, y = (off >> 3) & 7, z = off & 7;
+                if (!(in[0][x] && in[1][y] && in[2][z])) continue;
+                if (acc.isValueOn(openvdb::Coord(f[0][x], f[1][y], f[2][z]))) masks[b].setOn(openvdb::Index(off));
             }
         }
     });

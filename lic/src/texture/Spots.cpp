@@ -5,6 +5,7 @@
 #include "lic/texture/Noise.h"
 
 #include <algorithm>
+#include <array>
 #include <numeric>
 
 namespace lic {
@@ -49,6 +50,19 @@ void checkCount(double count)
     }
 }
 
+/// The 125 cell offsets within ±2 on each axis, by distance from the centre cell.
+const std::array<std::array<int, 3>, 125> kNearestFirst = [] {
+    std::array<std::array<int, 3>, 125> o{};
+    std::size_t n = 0;
+    for (int x = -2; x <= 2; ++x)
+        for (int y = -2; y <= 2; ++y)
+            for (int z = -2; z <= 2; ++z) o[n++] = {x, y, z};
+    std::stable_sort(o.begin(), o.end(), [](const auto& a, const auto& b) {
+        return a[0] * a[0] + a[1] * a[1] + a[2] * a[2] < b[0] * b[0] + b[1] * b[1] + b[2] * b[2];
+    });
+    return o;
+}();
+
 /// Dense background grid for minimum-distance queries (Bridson): cells of edge r/√3 hold at most
 /// one accepted point each.
 class DiskGrid
@@ -71,15 +85,18 @@ public:
     {
         return (std::size_t(c[0]) * std::size_t(mDim[1]) + std::size_t(c[1])) * std::size_t(mDim[2]) + std::size_t(c[2]);
     }
+    /// No accepted point closer than r to p: the cells within ±2 of p's, nearest first (a dart is
+    /// mostly refused by a point in the 27 cells around it, so the search usually ends early; the
+    /// answer does not depend on the order).
     bool free(const Vec3d& p, const std::vector<Vec3d>& pts) const
     {
         const auto c = cellOf(p);
-        for (int x = std::max(0, c[0] - 2); x <= std::min(mDim[0] - 1, c[0] + 2); ++x)
-            for (int y = std::max(0, c[1] - 2); y <= std::min(mDim[1] - 1, c[1] + 2); ++y)
-                for (int z = std::max(0, c[2] - 2); z <= std::min(mDim[2] - 1, c[2] + 2); ++z) {
-                    const std::int64_t q = mCells[index({x, y, z})];
-                    if (q >= 0 && (pts[std::size_t(q)] - p).lengthSqr() < mR2) return false;
-                }
+        for (const auto& o : kNearestFirst) {
+            const int x = c[0] + o[0], y = c[1] + o[1], z = c[2] + o[2];
+            if (x < 0 || y < 0 || z < 0 || x >= mDim[0] || y >= mDim[1] || z >= mDim[2]) continue;
+            const std::int64_t q = mCells[index({x, y, z})];
+            if (q >= 0 && (pts[std::size_t(q)] - p).lengthSqr() < mR2) return false;
+        }
         return true;
     }
     void insert(const Vec3d& p, std::int64_t id) { mCells[index(cellOf(p))] = id; }
