@@ -6,7 +6,6 @@
 // links OpenVDB and its own read code only (20 shared libraries; licvdb links 27, MPI among them,
 // and loads OpenImageIO and VTK only when it needs them), so it starts sooner than `licvdb`.
 // Exit 0: intact; 2: refused, with "licvdb-readcheck: error: REASON" on stderr; 1: another failure.
-#include "vdbexport/io/VdbCheck.h"
 #include "vdbexport/io/VdbIO.h"
 
 #include "lic/util/Error.h"
@@ -28,9 +27,8 @@ int main(int argc, char** argv)
     const std::string path = argv[2];
     try {
         openvdb::initialize();
-        (void)vdbexport::detail::checkedVdb(path);
-        // What licvdb's reads do with the file (the grids' descriptions, value ranges and the
-        // like, are worked out on grids already read: nothing of the file's left to check).
+        // VdbReader runs layer 1 first (checkedVdb), then what licvdb's reads do with the file.
+        // (`licvdb info` describes grids already read: nothing of the file's is left to check.)
         vdbexport::detail::VdbReader reader(path);
         (void)reader.fileMetadata();
         (void)reader.gridTypes();
