@@ -17,14 +17,17 @@
 
 #include <atomic>
 #include <cerrno>
+#include <csignal>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <map>
+#include <sstream>
 #include <thread>
 
+#include <sys/wait.h>
 #include <unistd.h>
 
 namespace fs = std::filesystem;
@@ -388,6 +391,75 @@ TEST_F(VdbCheckTest, TheChildRunsBesideLayerOneAndIsStoppedWhenLayerOneRefuses)
     EXPECT_EQ(inputErrorOf([&] { vdbexport::detail::checkedVdb(path); }), layerOne);
     EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 30.0)
         << "waited for the hanging child although layer 1 had refused the file";
+}
+
+// The fork server (startReadCheckServer): each check is a child forked from a process made at
+// start-up, handed to this one, and ends in the same verdicts as a started program. The set
+// executable (/bin/false, which fails every check) shows that the server, not a program, ran each
+// check; once the server has gone, checks start the program again.
+TEST_F(VdbCheckTest, ForkServerChildOutcomes)
+{
+    // First, before anything here starts a thread (writing the samples below uses TBB).
+    const auto check = [](const std::string& path) -> int {
+        if (path.find("crash") != std::string::npos) ::raise(SIGSEGV);
+        if (path.find("hang") != std::string::npos) std::this_thread::sleep_for(std::chrono::seconds(60));
+        if (path.find("pid") != std::string::npos) { // say who runs the check, then pass
+            std::ofstream(path) << ::getpid() << " " << ::getppid() << "\n";
+            return 0;
+        }
+        return vdbexport::detail::readCheckMain(path, "licvdb-readcheck");
+    };
+    ASSERT_TRUE(vdbexport::startReadCheckServer(check));
+    struct ServerGuard
+    {
+        ~ServerGuard() { vdbexport::stopReadCheckServer(); }
+    } serverGuard;
+    const IsolationGuard guard;
+    const pid_t server = vdbexport::readCheckServerPid();
+    ASSERT_GT(server, 0);
+    vdbexport::setReadIsolation("/bin/false");
+
+    const auto samples = vdb_samples::writeVdbSamples(mDir, 8);
+    // Intact: the real read, in a child of the server's handed to this process.
+    EXPECT_NO_THROW(vdbexport::checkInIsolatedProcess(samples[0]));
+    const std::string who = (mDir / "pid.txt").string();
+    EXPECT_NO_THROW(vdbexport::checkInIsolatedProcess(who));
+    std::istringstream ids(readFile(who));
+    pid_t childPid = -1, childParent = -1;
+    ids >> childPid >> childParent;
+    EXPECT_GT(childPid, 0);
+    EXPECT_NE(childPid, server);
+    EXPECT_NE(childPid, ::getpid());
+    // Refused: layer 1's reason, from the child's stderr.
+    const std::string junk = (mDir / "junk.vdb").string();
+    writeFile(junk, "not a vdb file at all, just some text that is long enough");
+    const std::string refused = inputErrorOf([&] { vdbexport::checkInIsolatedProcess(junk); });
+    EXPECT_CONTAINS(refused, "not-vdb");
+    // A crash: refused, naming the signal; the server lives on.
+    const std::string crashFile = (mDir / "crash.vdb").string();
+    writeFile(crashFile, "x");
+    const std::string crash = inputErrorOf([&] { vdbexport::checkInIsolatedProcess(crashFile); });
+    EXPECT_CONTAINS(crash, "crashed OpenVDB's reader");
+    EXPECT_CONTAINS(crash, "signal 11");
+    EXPECT_EQ(vdbexport::readCheckServerPid(), server);
+    // A hang: killed after LICVDB_READ_TIMEOUT seconds (a generous bound on the wait: busy machines).
+    ::setenv("LICVDB_READ_TIMEOUT", "1", 1);
+    const std::string hangFile = (mDir / "hang.vdb").string();
+    writeFile(hangFile, "x");
+    const auto t0 = std::chrono::steady_clock::now();
+    EXPECT_CONTAINS(inputErrorOf([&] { vdbexport::checkInIsolatedProcess(hangFile); }), "did not finish within 1 s");
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 30.0);
+    ::unsetenv("LICVDB_READ_TIMEOUT");
+    // Every child was this process's to wait for, and was waited for: none is left but the server.
+    int status = 0;
+    EXPECT_EQ(::waitpid(-1, &status, WNOHANG), 0) << "a child has ended and was not reaped";
+    // The server gone: checks start the set program (here /bin/false: a failure, not bad input).
+    ASSERT_EQ(::kill(server, SIGKILL), 0);
+    ASSERT_EQ(::waitpid(server, &status, 0), server);
+    EXPECT_THROW(vdbexport::checkInIsolatedProcess(samples[0]), lic::Error);
+    EXPECT_EQ(vdbexport::readCheckServerPid(), -1);
+    vdbexport::setReadIsolation("");
+    EXPECT_NO_THROW(vdbexport::checkInIsolatedProcess(samples[0]));
 }
 
 TEST(Sha256, KnownDigests)

@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -115,6 +116,10 @@ public:
     /// @throw lic::Error if it cannot be started.
     static IsolatedCheck start(const std::string& exe, const std::string& path, const std::vector<std::string>& args,
                                const std::string& reader, const std::string& expected);
+    /// Take over a child already running (this process's own, reading `path`; its stderr's read
+    /// end `errFd`): the fork server's.
+    static IsolatedCheck adopt(pid_t pid, int errFd, const std::string& path, const std::string& reader,
+                               const std::string& expected);
     void finish();
 
 private:
@@ -150,6 +155,25 @@ std::string findVdbReadHelper(const std::string& executable);
 
 /// The executable set by setReadIsolation ("" if none).
 std::string readIsolationExecutable();
+
+/// @brief Start layer 2's fork server: a process forked from this one now, which stays
+///        single-threaded and forks one child per .vdb check that runs `check(path)` (its return
+///        value is the child's exit code, as licvdb-readcheck's: detail::readCheckMain). Such a
+///        child starts in about a millisecond, where a program takes 50–80 ms to link OpenVDB. Each
+///        child is handed to this process (which becomes its subreaper), so startIsolatedCheck
+///        waits for it, times it out and kills it exactly as a started program.
+///        Call it before this process starts threads of its own (TBB's among them): the server's
+///        children must not inherit a half-copied thread pool. Only .vdb checks use it (a mesh
+///        is still checked by a program, checkReadInIsolatedProcess); a check falls back to a
+///        program if the server has gone.
+/// @return false if it could not be started (checks then start programs as before).
+bool startReadCheckServer(std::function<int(const std::string& path)> check);
+
+/// Stop the fork server (tests); checks start programs again.
+void stopReadCheckServer();
+
+/// The fork server's process id, -1 when none is running (tests).
+pid_t readCheckServerPid();
 
 /// @brief Time allowed for the isolated read of a file of `fileBytes` bytes, in seconds: 20 s plus
 ///        1 s per 10 MB, or $LICVDB_READ_TIMEOUT seconds if set (> 0).

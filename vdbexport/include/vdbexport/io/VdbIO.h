@@ -223,6 +223,12 @@ VdbCheckResult checkedVdb(const std::string& path);
 /// Forget the files checkedVdb has passed (tests).
 void clearCheckedVdbCache();
 
+/// @brief Layer 2's read of a .vdb, as the child process runs it: layer 1, then the file's
+///        metadata, grid headers and every grid read through VdbReader, in this process (layer 2
+///        must be off here: setReadIsolation("")). Prints "WHO: error: REASON" on stderr on failure.
+/// @return the child's exit code: 0 intact, 2 refused (bad input), 1 another failure.
+int readCheckMain(const std::string& path, const char* who);
+
 /// "density (float), vel (vec3s)" — for error messages; "no grids" when empty.
 std::string listGrids(const std::vector<std::pair<std::string, std::string>>& grids);
 
