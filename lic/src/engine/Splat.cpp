@@ -85,6 +85,8 @@ SplatTables::SplatTables(const std::vector<double>& radii, const LicSettings& se
     mDD = 1.0 / 16.0;
     mNTau = int(std::ceil((mTauMax - mTauMin) / mDTau)) + 1;
     mND = int(std::ceil(mReach / mDD)) + 2;
+    mInvDTau = exactInverse(mDTau);
+    mInvDD = exactInverse(mDD);
     mTable.assign(std::size_t(mNTau) * std::size_t(mND) * std::size_t(mParts), 0.0f);
     if (mExp) mWeights = win.weights; // i = 0 … n
     const double total = win.total();
@@ -120,10 +122,30 @@ SplatTables::SplatTables(const std::vector<double>& radii, const LicSettings& se
     });
 }
 
+namespace {
+
+/// out[p] += the four corners' weighted sum, for p < P known at compile time (no aliasing checks,
+/// no remainder loop): the same operations in the same order as the general loop below.
+template<std::size_t P>
+void addCorners(const float* c00, const float* c01, const float* c10, const float* c11, float w00, float w01,
+                float w10, float w11, float* __restrict out)
+{
+    for (std::size_t p = 0; p < P; ++p) out[p] += w00 * c00[p] + w01 * c01[p] + w10 * c10[p] + w11 * c11[p];
+}
+
+} // namespace
+
+double SplatTables::exactInverse(double step)
+{
+    int e = 0;
+    return std::frexp(step, &e) == 0.5 ? 1.0 / step : 0.0;
+}
+
 void SplatTables::add(double tau, double d, float a, float* out) const
 {
     if (!(tau >= mTauMin && tau <= mTauMax && d < mReach)) return;
-    const double ft = (tau - mTauMin) / mDTau, fd = d / mDD;
+    const double ft = mInvDTau != 0 ? (tau - mTauMin) * mInvDTau : (tau - mTauMin) / mDTau;
+    const double fd = mInvDD != 0 ? d * mInvDD : d / mDD;
     const int t0 = std::min(int(ft), mNTau - 2), d0 = std::min(int(fd), mND - 2);
     const float wt = float(ft - t0), wd = float(fd - d0);
     const std::size_t P = std::size_t(mParts), row = std::size_t(mND) * P;
@@ -132,7 +154,16 @@ void SplatTables::add(double tau, double d, float a, float* out) const
     const float* c10 = c00 + row;
     const float* c11 = c10 + P;
     const float w00 = a * (1 - wt) * (1 - wd), w01 = a * (1 - wt) * wd, w10 = a * wt * (1 - wd), w11 = a * wt * wd;
-    for (std::size_t p = 0; p < P; ++p) out[p] += w00 * c00[p] + w01 * c01[p] + w10 * c10[p] + w11 * c11[p];
+    // The part counts of 1–4 widths with their halos (2, 4, 6, 8), and of one width alone.
+    switch (P) {
+    case 1: return addCorners<1>(c00, c01, c10, c11, w00, w01, w10, w11, out);
+    case 2: return addCorners<2>(c00, c01, c10, c11, w00, w01, w10, w11, out);
+    case 4: return addCorners<4>(c00, c01, c10, c11, w00, w01, w10, w11, out);
+    case 6: return addCorners<6>(c00, c01, c10, c11, w00, w01, w10, w11, out);
+    case 8: return addCorners<8>(c00, c01, c10, c11, w00, w01, w10, w11, out);
+    default:
+        for (std::size_t p = 0; p < P; ++p) out[p] += w00 * c00[p] + w01 * c01[p] + w10 * c10[p] + w11 * c11[p];
+    }
 }
 
 void SplatTables::addDirect(double tau, double d, float a, int i0, int i1, double weight, float* out) const

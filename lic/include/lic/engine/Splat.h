@@ -56,12 +56,18 @@ public:
     void addDirect(double tau, double d, float a, int i0, int i1, double weight, float* out) const;
 
 private:
+    /// 1/step if step is a power of two (then x·(1/step) is x/step exactly), else 0.
+    static double exactInverse(double step);
+
     std::vector<double> mRadii;
     double mH, mDecay, mTheta;
     bool mExp, mRipple;
     int mC, mParts;
     double mReach, mTauMin, mTauMax;
     double mDTau, mDD;
+    // 1/ΔΤ and 1/Δd where they are powers of two (h = ½ and the default Δd), so that multiplying
+    // by them gives the division's bits exactly; 0 where they are not (add() divides).
+    double mInvDTau = 0, mInvDD = 0;
     int mNTau, mND;
     std::vector<double> mWeights; // exp: c^i, i = 0 … n
     std::vector<float> mTable; // [tau][d][part]
