@@ -38,4 +38,15 @@ std::string allocatorDescription()
 #endif
 }
 
+void useFreshArena()
+{
+#ifdef LICVDB_JEMALLOC
+    unsigned arena = 0;
+    std::size_t size = sizeof arena;
+    if (mallctl("arenas.create", static_cast<void*>(&arena), &size, nullptr, 0) != 0) return;
+    (void)mallctl("thread.tcache.flush", nullptr, nullptr, nullptr, 0);
+    (void)mallctl("thread.arena", nullptr, nullptr, static_cast<void*>(&arena), sizeof arena);
+#endif
+}
+
 } // namespace vdbexport::cli

@@ -4,6 +4,7 @@
 // each. Only main() catches: lic::InputError and usage errors exit 2, other failures exit 1.
 // Progress goes to stderr when it is a terminal; --json puts a machine-readable summary on stdout.
 
+#include "Allocator.h"
 #include "Command.h"
 
 #include "vdbexport/bake/Distributed.h"
@@ -91,7 +92,10 @@ int main(int argc, char** argv)
     if (!inReadChild() && !vdbexport::readIsolationExecutable().empty() && !(fork && std::string(fork) == "0")) {
         openvdb::initialize();
         vdbexport::startReadCheckServer(
-            [](const std::string& path) { return vdbexport::detail::readCheckMain(path, "licvdb-readcheck"); });
+            [](const std::string& path) {
+                useFreshArena();
+                return vdbexport::detail::readCheckMain(path, "licvdb-readcheck");
+            });
     }
 
     CLI::App app{"licvdb: 3D line integral convolution of vector fields, baked into OpenVDB volumes"};
