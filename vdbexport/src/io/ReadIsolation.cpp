@@ -14,8 +14,8 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
-#include <optional>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <sys/stat.h>
 #include <thread>
@@ -51,7 +51,6 @@ std::string childReason(const std::string& err)
     return line;
 }
 
-
 // ---- the fork server -----------------------------------------------------------------------
 //
 // licvdb (P) forks the server (S) at start-up, before any thread of its own. For a check, P sends
@@ -71,7 +70,8 @@ struct Server
 
 Server sServer;
 
-/// Send or receive a whole message, retrying on EINTR; false on any failure (the peer gone).
+/// Send `bytes` as one message (with `passFd`, if any, passed along), retrying on EINTR; false on
+/// any failure (the peer gone).
 bool sendAll(int fd, const void* data, std::size_t bytes, int passFd = -1)
 {
     iovec iov{const_cast<void*>(data), bytes};
@@ -253,7 +253,6 @@ pid_t readCheckServerPid()
     const std::lock_guard<std::mutex> lock(sServer.mutex);
     return sServer.socket >= 0 ? sServer.pid : -1;
 }
-
 
 void setReadIsolation(const std::string& executable, const std::string& vdbHelper)
 {
