@@ -84,12 +84,14 @@ int main(int argc, char** argv)
         vdbexport::setReadIsolation(self, vdbexport::findVdbReadHelper(self));
     }
     // Layer 2's checks are forked from a server process made now, while this process runs no
-    // thread of its own yet (TBB starts with the command): a forked check starts in about a
-    // millisecond, licvdb-readcheck in 50–80 ms (most of it linking OpenVDB).
+    // thread of its own yet (TBB starts with the command; log4cplus, which OpenVDB links, has
+    // started idle ones, which a fork does not copy): a forked check starts in a few
+    // milliseconds, licvdb-readcheck in 50–80 ms (most of it linking OpenVDB).
     // LICVDB_READ_FORK=0 starts a program per check instead.
     // OpenVDB's type registry is set up first, for the server's children to inherit (10 ms each).
-    const char* fork = std::getenv("LICVDB_READ_FORK");
-    if (!inReadChild() && !vdbexport::readIsolationExecutable().empty() && !(fork && std::string(fork) == "0")) {
+    const char* forkSetting = std::getenv("LICVDB_READ_FORK");
+    const bool forkOff = forkSetting && std::string(forkSetting) == "0";
+    if (!inReadChild() && !vdbexport::readIsolationExecutable().empty() && !forkOff) {
         openvdb::initialize();
         vdbexport::startReadCheckServer(
             [](const std::string& path) {

@@ -159,7 +159,7 @@ std::string readIsolationExecutable();
 /// @brief Start layer 2's fork server: a process forked from this one now, which stays
 ///        single-threaded and forks one child per .vdb check that runs `check(path)` (its return
 ///        value is the child's exit code, as licvdb-readcheck's: detail::readCheckMain). Such a
-///        child starts in about a millisecond, where a program takes 50–80 ms to link OpenVDB. Each
+///        child starts in a few milliseconds, where a program takes 50–80 ms to link OpenVDB. Each
 ///        child is handed to this process (which becomes its subreaper), so startIsolatedCheck
 ///        waits for it, times it out and kills it exactly as a started program.
 ///        Call it before this process starts threads of its own (TBB's among them): the server's
