@@ -24,6 +24,8 @@
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -572,4 +574,53 @@ TEST_F(StreamBake, ALoopTooBigForMemoryIsRefusedBeforeItStarts)
     ::unsetenv("LICVDB_READ_MEMORY_MB");
     for (const auto& entry : fs::directory_iterator(sDir))
         EXPECT_EQ(entry.path().filename().string().find("too_many_frames"), std::string::npos) << entry.path();
+}
+
+// A spot still's leaves are sealed as its bricks finish (compressed for the file, their values
+// dropped): the file must be the one whole leaves give, byte for byte but for the header's random
+// UUID, for every grid a still can have (lines, halos, the width series, colour, scalar, tangent,
+// velocity, input), in floats and in half floats. Loops and noise bakes keep whole leaves.
+TEST_F(StreamBake, SealedLeavesWriteTheFileWholeLeavesWrite)
+{
+    auto fileBytes = [](const std::string& path) {
+        std::ifstream in(path, std::ios::binary);
+        return std::string(std::istreambuf_iterator<char>(in), {});
+    };
+    struct EnvGuard
+    {
+        ~EnvGuard() { ::unsetenv("LICVDB_SEAL_LEAVES"); }
+    } guard;
+    for (const bool half : {false, true}) {
+        // The same path both times (the recipe, path included, is in the file's metadata).
+        std::string bytes[2];
+        auto r = spotRecipe(std::string("sealed") + (half ? "_half" : "") + ".vdb");
+        r.output.half = half;
+        r.output.writeInput = true;
+        r.output.writeVelocity = true;
+        for (const bool seal : {true, false}) {
+            if (seal) ::unsetenv("LICVDB_SEAL_LEAVES");
+            else ::setenv("LICVDB_SEAL_LEAVES", "0", 1);
+            const auto summary = vdbexport::bake(r);
+            EXPECT_EQ(summary["sealed_leaves"].get<bool>(), seal) << "half " << half;
+            bytes[seal ? 0 : 1] = fileBytes(r.output.path);
+            if (seal) {
+                std::set<std::string> names;
+                for (const auto& g : readAll(r.output.path)) names.insert(g->getName());
+                for (const char* want :
+                     {"density", "halo", "density_w3", "halo_w3", "color", "scalar", "tangent", "velocity", "input"})
+                    EXPECT_TRUE(names.count(want)) << want;
+            }
+        }
+        const std::string &a = bytes[0], &b = bytes[1];
+        ASSERT_GT(a.size(), 10000u);
+        ASSERT_EQ(a.size(), b.size()) << "half " << half;
+        constexpr std::size_t kUuid = 21, kUuidEnd = 21 + 36; // the header's random UUID
+        EXPECT_EQ(a.substr(0, kUuid), b.substr(0, kUuid));
+        EXPECT_TRUE(a.substr(kUuidEnd) == b.substr(kUuidEnd)) << "half " << half << ": sealed and whole leaves differ";
+    }
+    ::unsetenv("LICVDB_SEAL_LEAVES");
+    auto loop = spotRecipe("sealed_loop.vdb");
+    loop.animation.frames = 2;
+    EXPECT_FALSE(vdbexport::bake(loop)["sealed_leaves"].get<bool>());
+    EXPECT_FALSE(vdbexport::bake(recipe("sealed_noise.vdb"))["sealed_leaves"].get<bool>());
 }

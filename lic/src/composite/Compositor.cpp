@@ -112,12 +112,49 @@ Compositor::SpotVoxel Compositor::composeSpots(const Raw& raw, float widthT, flo
     return v;
 }
 
+template<typename Fn>
+void Compositor::forEachStillSet(Fn&& fn)
+{
+    // The names and order of frame() for a still composed on arrival, then buildStatic()'s.
+    int g = 0;
+    fn(g++, std::string("density"), mStill.density);
+    fn(g++, std::string("halo"), mStill.halo);
+    for (std::size_t k = 0; k < mStill.lines.size(); ++k) {
+        fn(g++, "density_w" + std::to_string(k + 1), mStill.lines[k]);
+        fn(g++, "halo_w" + std::to_string(k + 1), mStill.halos[k]);
+    }
+    if (mInputLeaves.enabled()) fn(g++, std::string("input"), mInputLeaves);
+    if (mTangentLeaves.enabled()) fn(g++, std::string("tangent"), mTangentLeaves);
+    if (mVelocityLeaves.enabled()) fn(g++, std::string("velocity"), mVelocityLeaves);
+    if (mColorLeaves.enabled()) {
+        fn(g++, std::string("color"), mColorLeaves);
+        fn(g++, std::string("scalar"), mScalarLeaves);
+    }
+}
+
+bool Compositor::sealLeaves(LeafSealer* sealer)
+{
+    if (!sealer || !mSettings.composesOnArrival() || mSettings.frames != 1) return false;
+    std::vector<std::string> names;
+    forEachStillSet([&](int, const std::string& name, const auto&) { names.push_back(name); });
+    sealer->begin(names);
+    mSealer = sealer;
+    return true;
+}
+
 void Compositor::consume(const BrickChannels& bc)
 {
     Moments moments;
     for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i)
         if (!bc.blockTouched || bc.blockTouched[i]) consumeBlock(bc, i, moments);
     mMoments[bc.index] = moments;
+    if (!mSealer) return;
+    // The brick owns its blocks: their leaves are final.
+    for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i) {
+        if (bc.blockTouched && !bc.blockTouched[i]) continue;
+        const std::size_t b = bc.brick->blocks[i];
+        forEachStillSet([&](int g, const std::string&, auto& set) { set.seal(b, *mSealer, g); });
+    }
 }
 
 void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& moments)

@@ -10,6 +10,7 @@
 #include "bake/Write.h"
 
 #include "vdbexport/io/FieldSequence.h"
+#include "vdbexport/io/SealedLeaves.h"
 
 #include "lic/engine/Engine.h"
 #include "lic/util/Parallel.h"
@@ -20,6 +21,9 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
+#include <optional>
+#include <string>
 
 namespace vdbexport {
 
@@ -135,6 +139,7 @@ nlohmann::json summarise(const Recipe& recipe, const Plan& plan, const FrameBake
         {"samples", samples},
         {"samples_per_voxel", st.voxels ? double(samples) / double(st.voxels) : 0.0},
         {"deposits", deposits},
+        {"sealed_leaves", fb.sealed},
         {"bricks", fb.layout().size()},
         {"brick_size", st.brickDim},
         {"spots", spotsJson},
@@ -168,7 +173,16 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     Job& job = Job::current();
     const Plan plan = job.stage("planning the bake", [&] { return pipeline::makePlan(recipe); });
     openvdb::initialize();
-    FrameBake fb(plan, job, progress);
+    // One process: a spot still's leaves are sealed (compressed for the file) as its bricks
+    // finish, so the bake holds its compressed output instead of float leaves
+    // (vdbexport/io/SealedLeaves.h). LICVDB_SEAL_LEAVES=0 keeps whole leaves (the same file).
+    std::optional<detail::SealedLeaves> sealer;
+    const char* sealEnv = std::getenv("LICVDB_SEAL_LEAVES");
+    if (!job.distributed() && !(sealEnv && std::string(sealEnv) == "0")) sealer.emplace(recipe.output.half);
+    pipeline::FrameOptions frameOptions;
+    frameOptions.sealer = sealer ? &*sealer : nullptr;
+    FrameBake fb(plan, job, progress, std::move(frameOptions));
+    const detail::SealedLeaves* sealed = fb.sealed ? &*sealer : nullptr;
 
     // Metadata, files, manifest.
     const auto t3 = Clock::now();
@@ -181,7 +195,7 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     pipeline::Written written;
     double tGather = 0.0;
     if (!job.distributed()) {
-        written = pipeline::writeFrames(plan, *fb.compositor, densityMeta, progress);
+        written = pipeline::writeFrames(plan, *fb.compositor, densityMeta, progress, {}, sealed);
         pipeline::writeManifest(recipe, resolved, written.paths, *written.output, pipeline::gridsJson(written.firstGrids),
                                 fb.domain().voxelSize(), desc.color, desc.spots);
     } else {

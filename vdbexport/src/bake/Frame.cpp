@@ -208,6 +208,7 @@ void FrameBake::makeTexture(const FrameOptions& options)
         }
         compositor.emplace(std::move(cs),
                            compositeInputs(mPlan, *scalars, input, cmap ? &*cmap : nullptr), field(), domain(), layout());
+        sealed = compositor->sealLeaves(options.sealer);
     });
     seconds.input += since(t0);
 }

@@ -63,6 +63,9 @@ struct FrameOptions
     /// read again with that margin if the guess was short.
     int partMarginGuess = 0;
     std::function<int(const FieldShare&, double maxSpeed)> partMargin;
+    /// Seal a spot still's leaves as its bricks finish (lic::Compositor::sealLeaves); FrameBake's
+    /// `sealed` says whether it did.
+    lic::LeafSealer* sealer = nullptr;
 };
 
 /// One frame baked up to its composited grids (call compositor->frame(f) to get them). Not
@@ -87,6 +90,7 @@ public:
     lic::LicStats stats;                         ///< of the convolution of this share
     std::uint64_t shareVoxels = 0;               ///< active output voxels of this share
     int partMargin = 0;                          ///< field voxels added to the part's margin
+    bool sealed = false;                         ///< the compositor seals leaves (FrameOptions::sealer)
     /// Seconds of the stages (read: from construction; input: ranges and texture).
     struct Times
     {

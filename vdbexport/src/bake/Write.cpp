@@ -137,10 +137,10 @@ void writeFramesConcurrently(const Recipe& r, lic::Compositor& compositor, const
 } // namespace
 
 void stageFrame(const Recipe& recipe, openvdb::GridPtrVec& grids, const openvdb::MetaMap& densityMeta, int frameNumber,
-                const std::string& path, OutputSet& output)
+                const std::string& path, OutputSet& output, const vdbexport::detail::SealedLeaves* sealed)
 {
     prepareFrame(recipe, grids, densityMeta, frameNumber);
-    output.addVdb(path, grids);
+    output.addVdb(path, grids, {}, sealed);
 }
 
 nlohmann::json gridsJson(const openvdb::GridPtrVec& grids)
@@ -158,7 +158,7 @@ nlohmann::json gridsJson(const openvdb::GridPtrVec& grids)
 }
 
 Written writeFrames(const Plan& plan, lic::Compositor& compositor, const openvdb::MetaMap& densityMeta,
-                    lic::Progress& progress, const FrameHook& gather)
+                    lic::Progress& progress, const FrameHook& gather, const vdbexport::detail::SealedLeaves* sealed)
 {
     const Recipe& r = plan.recipe;
     Written out;
@@ -172,7 +172,7 @@ Written writeFrames(const Plan& plan, lic::Compositor& compositor, const openvdb
             if (progress.wasInterrupted()) throw lic::Cancelled();
             openvdb::GridPtrVec grids = compositor.frame(f);
             if (gather) gather(f, grids);
-            stageFrame(r, grids, densityMeta, f, out.paths[std::size_t(f - 1)], *out.output);
+            stageFrame(r, grids, densityMeta, f, out.paths[std::size_t(f - 1)], *out.output, sealed);
             if (f == 1) out.firstGrids = grids;
             progress.advance(1);
         }

@@ -46,16 +46,18 @@ Description describeBake(const Plan& plan, const nlohmann::json& resolved, const
                          std::uint64_t spotCount, const Ranges& ranges, const lic::Colormap* cmap);
 
 /// Stage one frame's grids for `path`: `densityMeta` and `lic_frame` = frameNumber on `density`,
-/// half floats if the recipe asks.
+/// half floats if the recipe asks. `sealed`: the records of grids whose leaves were sealed.
 void stageFrame(const Recipe& recipe, openvdb::GridPtrVec& grids, const openvdb::MetaMap& densityMeta, int frameNumber,
-                const std::string& path, OutputSet& output);
+                const std::string& path, OutputSet& output, const vdbexport::detail::SealedLeaves* sealed = nullptr);
 
 /// The manifest's `grids` section: name, type, active voxels, voxel size and world bounds of each.
 nlohmann::json gridsJson(const openvdb::GridPtrVec& grids);
 
 /// Write every frame: `densityMeta` goes on each frame's `density` grid, with `lic_frame`.
+/// `sealed`: the records of a still's sealed leaves (Compositor::sealLeaves).
 Written writeFrames(const Plan& plan, lic::Compositor& compositor, const openvdb::MetaMap& densityMeta,
-                    lic::Progress& progress, const FrameHook& gather = {});
+                    lic::Progress& progress, const FrameHook& gather = {},
+                    const vdbexport::detail::SealedLeaves* sealed = nullptr);
 
 /// Write the sidecar manifest of a bake (`paths`: its frame files, staged in `output`, with their
 /// SHA-256; `grids`: gridsJson() of the first frame; `extra`: keys added or replaced, e.g. an

@@ -706,10 +706,11 @@ void OutputSet::finish(Staged& f)
     if (hashFailed) std::rethrow_exception(hashFailed);
 }
 
-void OutputSet::addVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)
+void OutputSet::addVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata,
+                       const detail::SealedLeaves* sealed)
 {
     refuseTwice(path);
-    add(writeVdb(path, std::move(grids), fileMetadata));
+    add(writeVdb(path, std::move(grids), fileMetadata, sealed));
 }
 
 void OutputSet::add(Pending&& file)
@@ -742,7 +743,8 @@ void checkWritten(const std::string& path, const std::string& tmp, std::size_t g
 
 } // namespace
 
-OutputSet::Pending OutputSet::writeVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)
+OutputSet::Pending OutputSet::writeVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata,
+                                      const detail::SealedLeaves* sealed)
 {
     openvdb::initialize();
     Staged f = stage(path);
@@ -758,7 +760,8 @@ OutputSet::Pending OutputSet::writeVdb(const std::string& path, openvdb::GridPtr
             copy->apply<VoxelizableGridTypes>([](auto& grid) { grid.tree().voxelizeActiveTiles(); });
             grids[i] = copy;
         }
-        detail::writeVdbFile(tmp, openvdb::GridCPtrVec(grids.begin(), grids.end()), fileMetadata);
+        detail::writeVdbFile(tmp, openvdb::GridCPtrVec(grids.begin(), grids.end()), fileMetadata, detail::kWriteHoldBytes,
+                             sealed);
         // io::File does not report stream errors after opening (e.g. a full disk): check the
         // structure of what was written and read the headers back. Beside it, the file is flushed
         // and hashed (finish); a failed check is reported first.

@@ -15,6 +15,7 @@
 // (tests/unit/test_vdbio.cpp compares them); the record layout followed here is the same in
 // OpenVDB 10 to 13.
 #include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/SealedLeaves.h"
 
 #include <lic/util/Error.h>
 
@@ -33,8 +34,11 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <set>
 #include <sstream>
+#include <tuple>
+#include <type_traits>
 #include <utility>
 
 namespace vdbexport::detail {
@@ -54,6 +58,47 @@ struct Chunk
     std::vector<std::int8_t> masks;
     std::vector<std::int64_t> sizes;
 };
+
+/// The mask-compression kind, and the compressed block's size plus its 8-byte count, read off
+/// the leaf's record written from `at`: the value mask, the kind, its inactive values and
+/// selection mask, then the block's count (negative: stored uncompressed) and bytes.
+template<typename ValueT, typename MaskT>
+std::pair<std::int8_t, std::int64_t> parseRecord(std::string_view bytes, std::size_t at)
+{
+    std::size_t p = at + sizeof(typename MaskT::Word) * MaskT::WORD_COUNT;
+    if (p >= bytes.size()) throw lic::Error("a leaf's record is shorter than its value mask");
+    const auto kind = std::int8_t(bytes[p++]);
+    if (kind == io::NO_MASK_AND_ONE_INACTIVE_VAL || kind == io::MASK_AND_ONE_INACTIVE_VAL) p += sizeof(ValueT);
+    if (kind == io::MASK_AND_TWO_INACTIVE_VALS) p += 2 * sizeof(ValueT);
+    if (kind == io::MASK_AND_NO_INACTIVE_VALS || kind == io::MASK_AND_ONE_INACTIVE_VAL ||
+        kind == io::MASK_AND_TWO_INACTIVE_VALS)
+        p += sizeof(typename MaskT::Word) * MaskT::WORD_COUNT;
+    std::int64_t count = 0;
+    if (p + sizeof count > bytes.size()) throw lic::Error("a leaf's record is shorter than its layout");
+    std::memcpy(&count, bytes.data() + p, sizeof count);
+    const std::int64_t block = count < 0 ? -count : count;
+    if (p + sizeof count + std::size_t(block) != bytes.size())
+        throw lic::Error("a leaf's record does not end with its compressed block");
+    return {kind, block + std::int64_t(sizeof count)};
+}
+
+/// Append the leaf's record to `os` (its data compression and background set to `compression`
+/// and `background`); returns what the delayed-load table holds for it: the mask-compression kind
+/// and the compressed block's size.
+template<typename LeafT>
+std::pair<std::int8_t, std::int64_t> appendRecord(std::ostringstream& os, const LeafT& leaf, std::uint32_t compression,
+                                                  const typename LeafT::ValueType& background, bool half)
+{
+    using ValueT = typename LeafT::ValueType;
+    using MaskT = typename LeafT::NodeMaskType;
+    const auto at = std::size_t(os.tellp());
+    leaf.writeBuffers(os, half);
+    const auto [kind, size] = parseRecord<ValueT, MaskT>(os.view(), at);
+    // Archive's populateDelayedLoadMetadata computes the kind from the tree's background whatever
+    // the flags; with mask compression on, the record holds that same kind.
+    if (compression & io::COMPRESS_ACTIVE_MASK) return {kind, size};
+    return {io::MaskCompress<ValueT, MaskT>(leaf.valueMask(), MaskT(), leaf.buffer().data(), background).metadata, size};
+}
 
 /// One grid's leaves, compressed a chunk at a time with the stream state writeBuffers sees.
 template<typename GridT>
@@ -77,6 +122,16 @@ public:
     std::size_t leafCount() const { return mLeaves.leafCount(); }
     std::size_t chunkCount() const { return (leafCount() + kChunkLeaves - 1) / kChunkLeaves; }
 
+    /// Leaf i's sealed record (a topology-only leaf: its transientData indexes `sealed`).
+    const LeafRecord& sealed(std::size_t i, const SealedLeaves::Grid& sealed) const
+    {
+        const LeafT& leaf = mLeaves.leaf(i);
+        const std::size_t r = leaf.transientData();
+        if (leaf.isAllocated() || r >= sealed.records.size() || sealed.records[r].origin != leaf.origin())
+            throw lic::Error("grid '" + sealed.name + "' mixes sealed leaves with others");
+        return sealed.records[r];
+    }
+
     Chunk make(std::size_t c) const
     {
         const std::size_t begin = c * kChunkLeaves, end = std::min(leafCount(), begin + kChunkLeaves);
@@ -85,16 +140,8 @@ public:
         io::setDataCompression(os, mCompression);
         io::setGridBackgroundValuePtr(os, &mBackground);
         for (std::size_t i = begin; i < end; ++i) {
-            const LeafT& leaf = mLeaves.leaf(i);
-            const auto at = std::size_t(os.tellp());
-            leaf.writeBuffers(os, mHalf);
-            const auto [kind, size] = parse(os, at);
-            // Archive's populateDelayedLoadMetadata computes the kind from the tree's background
-            // whatever the flags; with mask compression on, the record holds that same kind.
-            out.masks.push_back(mCompression & io::COMPRESS_ACTIVE_MASK
-                                    ? kind
-                                    : io::MaskCompress<ValueT, MaskT>(leaf.valueMask(), MaskT(), leaf.buffer().data(),
-                                                                      mBackground).metadata);
+            const auto [kind, size] = appendRecord(os, mLeaves.leaf(i), mCompression, mBackground, mHalf);
+            out.masks.push_back(kind);
             if (mSizes) out.sizes.push_back(size);
         }
         if (!os) throw lic::Error("could not compress a grid's leaves");
@@ -103,29 +150,6 @@ public:
     }
 
 private:
-    /// The mask-compression kind, and the compressed block's size plus its 8-byte count, read off
-    /// the leaf's record written from `at`: the value mask, the kind, its inactive values and
-    /// selection mask, then the block's count (negative: stored uncompressed) and bytes.
-    static std::pair<std::int8_t, std::int64_t> parse(std::ostringstream& os, std::size_t at)
-    {
-        const std::string_view bytes = os.view();
-        std::size_t p = at + sizeof(typename MaskT::Word) * MaskT::WORD_COUNT;
-        if (p >= bytes.size()) throw lic::Error("a leaf's record is shorter than its value mask");
-        const auto kind = std::int8_t(bytes[p++]);
-        if (kind == io::NO_MASK_AND_ONE_INACTIVE_VAL || kind == io::MASK_AND_ONE_INACTIVE_VAL) p += sizeof(ValueT);
-        if (kind == io::MASK_AND_TWO_INACTIVE_VALS) p += 2 * sizeof(ValueT);
-        if (kind == io::MASK_AND_NO_INACTIVE_VALS || kind == io::MASK_AND_ONE_INACTIVE_VAL ||
-            kind == io::MASK_AND_TWO_INACTIVE_VALS)
-            p += sizeof(typename MaskT::Word) * MaskT::WORD_COUNT;
-        std::int64_t count = 0;
-        if (p + sizeof count > bytes.size()) throw lic::Error("a leaf's record is shorter than its layout");
-        std::memcpy(&count, bytes.data() + p, sizeof count);
-        const std::int64_t block = count < 0 ? -count : count;
-        if (p + sizeof count + std::size_t(block) != bytes.size())
-            throw lic::Error("a leaf's record does not end with its compressed block");
-        return {kind, block + std::int64_t(sizeof count)};
-    }
-
     openvdb::tree::LeafManager<const TreeT> mLeaves;
     const ValueT mBackground;
     std::uint32_t mCompression;
@@ -139,8 +163,9 @@ class ParallelArchive : public io::Archive
 public:
     using Fast = openvdb::TypeList<openvdb::FloatGrid, openvdb::Vec3SGrid>;
 
-    explicit ParallelArchive(std::uint64_t holdBytes)
+    ParallelArchive(std::uint64_t holdBytes, const SealedLeaves* sealed)
         : mHoldBytes(holdBytes)
+        , mSealed(sealed)
     {
     }
 
@@ -172,6 +197,8 @@ public:
             io::GridDescriptor gd(grid->getName(), grid->type(), grid->saveFloatAsHalf());
             const bool done =
                 sizesAsOpenVdb() && grid->apply<Fast>([&](const auto& g) { writeRecord(gd, g, file, streamMetadata); });
+            if (!done && mSealed && mSealed->find(grid->getName()))
+                throw lic::Error("grid '" + grid->getName() + "' is sealed but not written by licvdb's writer");
             if (!done) writeGrid(gd, grid, file, /*seekable=*/true);
             if (!file) return; // the caller checks the stream
         }
@@ -209,9 +236,10 @@ private:
         const bool sizes = compression() & (io::COMPRESS_BLOSC | io::COMPRESS_ZIP);
         const LeafRecords<GridT> leaves(grid, io::getDataCompression(os), sizes);
         const std::size_t n = leaves.leafCount(), chunks = leaves.chunkCount();
+        const SealedLeaves::Grid* sealed = sealedRecords(grid, os);
         const bool hold = grid.memUsage() <= mHoldBytes;
-        std::vector<Chunk> made(chunks);
-        tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+        std::vector<Chunk> made(sealed ? 0 : chunks);
+        tbb::parallel_for(std::size_t(0), made.size(), [&](std::size_t c) {
             made[c] = leaves.make(c);
             if (!hold) std::string().swap(made[c].bytes); // streamed again below
         });
@@ -222,15 +250,31 @@ private:
         if (n > 0) {
             table->resizeMask(n);
             if (sizes) table->resizeCompressedSize(n);
-            for (std::size_t c = 0, i = 0; c < chunks; ++c)
-                for (std::size_t k = 0; k < made[c].masks.size(); ++k, ++i) {
-                    table->setMask(i, made[c].masks[k]);
-                    if (sizes) table->setCompressedSize(i, made[c].sizes[k]);
+            auto entry = [&](std::size_t i, std::int8_t kind, std::int64_t size) {
+                table->setMask(i, kind);
+                if (sizes) table->setCompressedSize(i, size);
+            };
+            if (sealed) {
+                for (std::size_t i = 0; i < n; ++i) {
+                    const LeafRecord& r = leaves.sealed(i, *sealed);
+                    entry(i, r.kind, r.size);
                 }
+            }
+            for (std::size_t c = 0, i = 0; c < made.size(); ++c)
+                for (std::size_t k = 0; k < made[c].masks.size(); ++k, ++i)
+                    entry(i, made[c].masks[k], sizes ? made[c].sizes[k] : 0);
         }
         copy->insertMeta(openvdb::GridBase::META_FILE_DELAYED_LOAD, *table);
         if (io::getWriteGridStatsMetadata(os)) {
             copy->addStatsMetadata();
+            if (sealed) {
+                // The memory the leaves take with their values, as for the grid before sealing.
+                using LeafT = typename GridT::TreeType::LeafNodeType;
+                const LeafT whole(openvdb::Coord(0)), bare(openvdb::PartialCreate(), openvdb::Coord(0));
+                const auto mem = copy->template metaValue<openvdb::Int64>(openvdb::GridBase::META_FILE_MEM_BYTES);
+                copy->insertMeta(openvdb::GridBase::META_FILE_MEM_BYTES,
+                                 openvdb::Int64Metadata(mem + openvdb::Int64(n * (whole.memUsage() - bare.memUsage()))));
+            }
             copy->insertMeta(openvdb::GridBase::META_FILE_COMPRESSION,
                              openvdb::StringMetadata(io::compressionToString(io::getDataCompression(os))));
         }
@@ -239,7 +283,12 @@ private:
         grid.writeTopology(os);
         gd.setBlockPos(os.tellp());
 
-        if (hold) {
+        if (sealed) {
+            for (std::size_t i = 0; i < n && os; ++i) {
+                const std::string& bytes = leaves.sealed(i, *sealed).bytes;
+                os.write(bytes.data(), std::streamsize(bytes.size()));
+            }
+        } else if (hold) {
             for (Chunk& c : made) {
                 os.write(c.bytes.data(), std::streamsize(c.bytes.size()));
                 std::string().swap(c.bytes);
@@ -252,6 +301,20 @@ private:
         gd.writeStreamPos(os);
         gd.seekToEnd(os);
         io::setStreamMetadataPtr(os, fileMeta, /*transfer=*/false);
+    }
+
+    /// The sealed records of `grid` (null if it has none), checked against the stream state its
+    /// leaves are written with here.
+    template<typename GridT>
+    const SealedLeaves::Grid* sealedRecords(const GridT& grid, std::ostream& os) const
+    {
+        const SealedLeaves::Grid* sealed = mSealed ? mSealed->find(grid.getName()) : nullptr;
+        if (!sealed) return nullptr;
+        using ValueT = typename GridT::ValueType;
+        if (io::getDataCompression(os) != SealedLeaves::compression<ValueT>() || grid.saveFloatAsHalf() != mSealed->half()
+            || grid.constTree().background() != openvdb::zeroVal<ValueT>())
+            throw lic::Error("grid '" + grid.getName() + "' was sealed for another compression, precision or background");
+        return sealed;
     }
 
     /// The chunks made again on all cores and written in order, a few in flight at a time.
@@ -279,14 +342,73 @@ private:
     }
 
     std::uint64_t mHoldBytes;
+    const SealedLeaves* mSealed;
 };
 
 } // namespace
 
+template<typename T>
+std::uint32_t SealedLeaves::compression()
+{
+    // ParallelArchive's flags (io::Archive's default) as setGridCompression leaves them: no ZIP
+    // for fog volumes.
+    const std::uint32_t c = io::Archive::DEFAULT_COMPRESSION_FLAGS;
+    return std::is_floating_point_v<T> ? (c & ~std::uint32_t(io::COMPRESS_ZIP)) : c;
+}
+
+void SealedLeaves::begin(const std::vector<std::string>& grids)
+{
+    mGrids.clear();
+    for (const std::string& name : grids) {
+        mGrids.push_back(std::make_unique<Grid>());
+        mGrids.back()->name = name;
+    }
+}
+
+template<typename LeafT>
+std::uint32_t SealedLeaves::sealLeaf(int grid, const LeafT& leaf)
+{
+    using ValueT = typename LeafT::ValueType;
+    const std::uint32_t c = compression<ValueT>();
+    const ValueT background = openvdb::zeroVal<ValueT>();
+    std::ostringstream os(std::ios::out | std::ios::binary);
+    io::setDataCompression(os, c);
+    io::setGridBackgroundValuePtr(os, &background);
+    LeafRecord r;
+    r.origin = leaf.origin();
+    std::tie(r.kind, r.size) = appendRecord(os, leaf, c, background, mHalf);
+    if (!os) throw lic::Error("could not compress a leaf of grid '" + mGrids.at(std::size_t(grid))->name + "'");
+    r.bytes = std::move(os).str();
+    auto& records = mGrids.at(std::size_t(grid))->records;
+    const auto at = records.push_back(std::move(r));
+    const auto index = std::size_t(at - records.begin());
+    if (index > std::numeric_limits<std::uint32_t>::max()) throw lic::Error("too many leaves to seal");
+    return std::uint32_t(index);
+}
+
+std::uint32_t SealedLeaves::seal(int grid, const openvdb::FloatTree::LeafNodeType& leaf) { return sealLeaf(grid, leaf); }
+std::uint32_t SealedLeaves::seal(int grid, const openvdb::Vec3STree::LeafNodeType& leaf) { return sealLeaf(grid, leaf); }
+
+const SealedLeaves::Grid* SealedLeaves::find(const std::string& name) const
+{
+    for (const auto& g : mGrids)
+        if (g->name == name) return g.get();
+    return nullptr;
+}
+
+std::uint64_t SealedLeaves::bytes() const
+{
+    std::uint64_t n = 0;
+    for (const auto& g : mGrids)
+        for (const LeafRecord& r : g->records) n += sizeof r + r.bytes.capacity();
+    return n;
+}
+
 void writeVdbFile(const std::string& path, const openvdb::GridCPtrVec& grids, const openvdb::MetaMap& fileMetadata,
-                  std::uint64_t holdBytes)
+                  std::uint64_t holdBytes, const SealedLeaves* sealed)
 {
     if (!ParallelArchive::suits(grids)) {
+        if (sealed) throw lic::Error("cannot write '" + path + "': sealed grids need licvdb's writer");
         openvdb::io::File file(path);
         file.write(grids, fileMetadata);
         file.close();
@@ -294,7 +416,7 @@ void writeVdbFile(const std::string& path, const openvdb::GridCPtrVec& grids, co
     }
     std::ofstream file(path, std::ios::out | std::ios::binary | std::ios::trunc);
     if (!file) throw lic::Error("cannot write '" + path + "' (" + std::strerror(errno) + ")");
-    ParallelArchive(holdBytes).write(file, grids, fileMetadata);
+    ParallelArchive(holdBytes, sealed).write(file, grids, fileMetadata);
     file.close();
 }
 

@@ -95,6 +95,11 @@ public:
     Compositor(const CompositeSettings& settings, CompositeInputs inputs, const VelocityField& field,
                const OutputDomain& domain, const BrickLayout& layout);
 
+    /// Spot stills: hand every leaf to `sealer` as soon as its brick is consumed (LeafSealer.h), so
+    /// that frame(1)'s grids hold topology-only leaves. Call before the first consume(). Returns
+    /// false, and seals nothing, for other bakes (their leaves are read again when frames are
+    /// composed).
+    bool sealLeaves(LeafSealer* sealer);
     /// Turn a finished brick into leaves. Thread-safe (called from the brick's worker).
     void consume(const BrickChannels& bricks);
     /// After the last brick: merge the per-brick statistics in brick order (deterministic).
@@ -164,6 +169,10 @@ private:
     void composeLeaves(int f, LeafSet<openvdb::FloatGrid>& density, LeafSet<openvdb::FloatGrid>& halo,
                        std::vector<LeafSet<openvdb::FloatGrid>>& lines, std::vector<LeafSet<openvdb::FloatGrid>>& halos);
     void buildStatic();
+    /// fn(index, name, set) for each grid of a spot still composed on arrival, in frame(1)'s order:
+    /// the grids sealLeaves() seals.
+    template<typename Fn>
+    void forEachStillSet(Fn&& fn);
 
     CompositeSettings mSettings;
     CompositeInputs mInputs;
@@ -202,6 +211,7 @@ private:
     float mMaxInvPeak = 0.0f;
     openvdb::GridPtrVec mStatic;
     bool mStaticBuilt = false;
+    LeafSealer* mSealer = nullptr;
 
     std::vector<Moments> mMoments; // per brick
     ChannelStats mRaw;

@@ -2,6 +2,7 @@
 // owns its blocks, so slots are written without locks), then moved into a grid.
 #pragma once
 
+#include "lic/composite/LeafSealer.h"
 #include "lic/field/OutputDomain.h"
 
 #include <openvdb/openvdb.h>
@@ -40,6 +41,11 @@ public:
         return l ? *l : make(b, origin);
     }
     void drop(std::size_t b) { mLeaves[b].reset(); }
+    /// Hand block b's leaf (if any) to `sealer` as grid `grid`, and keep only its topology.
+    void seal(std::size_t b, LeafSealer& sealer, int grid)
+    {
+        if (const LeafT* l = at(b); l && !l->isEmpty()) mLeaves[b] = topologyOnly(*l, sealer.seal(grid, *l));
+    }
 
     /// Move every non-empty leaf into a new grid named `name` with the output transform (fog
     /// volume for floats, invariant vectors for vec3s); the set is empty afterwards.

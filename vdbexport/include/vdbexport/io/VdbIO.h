@@ -15,6 +15,10 @@
 
 namespace vdbexport {
 
+namespace detail {
+class SealedLeaves; // vdbexport/io/SealedLeaves.h
+}
+
 /// Grid names tried, in order, when no velocity grid name is given.
 inline constexpr const char* kDefaultVelocityNames[] = {"velocity", "vel", "v"};
 
@@ -101,12 +105,15 @@ public:
     /// Write grids for `path` as addVdb does, not yet into any set. Safe to call on several threads
     /// at once for different paths (and grids only read: shared grids are fine).
     /// @throw as writeVdbAtomic.
-    static Pending writeVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata = {});
+    /// `sealed`: the records of grids whose leaves were sealed (detail::writeVdbFile).
+    static Pending writeVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata = {},
+                            const detail::SealedLeaves* sealed = nullptr);
     /// Stage a file writeVdb wrote. @throw lic::Error if the set has a file for its path already.
     void add(Pending&& file);
     /// Stage grids for `path`, as writeVdbAtomic writes them (active tiles voxelized on copies,
     /// structure checked after writing): add(writeVdb(...)). @throw as writeVdbAtomic.
-    void addVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata = {});
+    void addVdb(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata = {},
+                const detail::SealedLeaves* sealed = nullptr);
     /// Stage a text file for `path`. @throw as writeTextAtomic.
     void addText(const std::string& path, const std::string& text);
     /// SHA-256 (64 hex digits) of the bytes staged for `path`. @throw lic::Error if none.
@@ -151,8 +158,10 @@ constexpr std::uint64_t kWriteHoldBytes = std::uint64_t(256) << 20;
 /// OpenVDB's own io::Archive::writeGrid within the file.
 /// Errors as io::File::write's (openvdb exceptions, lic::Error); a short write is the caller's
 /// to find (OutputSet::writeVdb checks the structure written).
+/// Grids with sealed leaves (SealedLeaves.h: topology-only leaves, their records in `sealed`, found
+/// by grid name) are written from those records.
 void writeVdbFile(const std::string& path, const openvdb::GridCPtrVec& grids, const openvdb::MetaMap& fileMetadata,
-                  std::uint64_t holdBytes = kWriteHoldBytes);
+                  std::uint64_t holdBytes = kWriteHoldBytes, const SealedLeaves* sealed = nullptr);
 
 /// Flush `tmp` to disk, then rename it over `path`. Removes `tmp` and throws lic::Error on failure.
 void commitAtomicWrite(const std::string& tmp, const std::string& path);

@@ -1,0 +1,45 @@
+// Sealed leaves: a spot still's output leaves handed, as each brick finishes, to whoever will write
+// them, which keeps what it needs (a file writer: the leaf's record as the file will hold it) so
+// that the leaf's 512 values can be dropped at once. The grids then hold the leaves' topology only
+// (origin and active mask), and the memory of a bake grows with its compressed output, not with
+// its float leaves: a 1024³ sparse bake holds ~1 GiB of records instead of 6 GiB of leaves.
+#pragma once
+
+#include <openvdb/openvdb.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace lic {
+
+/// Takes finished leaves; implemented by the writer (vdbexport::detail::SealedLeaves).
+class LeafSealer
+{
+public:
+    virtual ~LeafSealer() = default;
+    /// The grids whose leaves will be sealed, by name, before the first seal(); `grid` in seal()
+    /// indexes this list.
+    virtual void begin(const std::vector<std::string>& grids) = 0;
+    /// Keep what the leaf's values will be needed for. Returns the number the leaf's topology-only
+    /// copy carries (LeafNode::transientData) to find it again. Called from several threads at
+    /// once, for different leaves.
+    virtual std::uint32_t seal(int grid, const openvdb::FloatTree::LeafNodeType& leaf) = 0;
+    virtual std::uint32_t seal(int grid, const openvdb::Vec3STree::LeafNodeType& leaf) = 0;
+};
+
+/// A leaf's topology-only copy: the same origin and active mask, no values (OpenVDB's partial
+/// leaf: its buffer is not allocated, LeafNode::isAllocated() is false), carrying `tag`.
+template<typename LeafT>
+std::unique_ptr<LeafT> topologyOnly(const LeafT& leaf, std::uint32_t tag)
+{
+    auto out = std::make_unique<LeafT>(openvdb::PartialCreate(), leaf.origin(),
+                                       openvdb::zeroVal<typename LeafT::ValueType>(), false);
+    out->setValueMask(leaf.getValueMask());
+    out->setTransientData(tag);
+    return out;
+}
+
+} // namespace lic
