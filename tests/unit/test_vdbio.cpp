@@ -4,6 +4,7 @@
 
 #include "vdbexport/io/Info.h"
 #include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/SealedLeaves.h"
 #include "io/VdbGridReader.h"
 
 #include <lic/util/Error.h>
@@ -17,6 +18,8 @@
 #include <functional>
 #include <iterator>
 #include <string>
+#include <type_traits>
+#include <utility>
 
 #include <unistd.h>
 
@@ -595,6 +598,56 @@ TEST_F(VdbIOTest, ParallelWriteGivesTheBytesOfOpenVdbsWriter)
             }
             lazy.close();
         }
+}
+
+// Sealed leaves (vdbexport/io/SealedLeaves.h): each leaf's record made ahead, the grid holding
+// topology-only leaves. The writer must give the file whole leaves give, byte for byte but for the
+// UUID, and refuse records made for another precision or a grid that mixes both kinds of leaf.
+TEST_F(VdbIOTest, SealedLeavesAreWrittenAsTheWholeLeavesWouldBe)
+{
+    auto density = noisyGrid<openvdb::FloatGrid>("density", 40, true, 11);
+    auto velocity = noisyGrid<openvdb::Vec3SGrid>("velocity", 12, true, 12);
+    velocity->setGridClass(openvdb::GRID_UNKNOWN);
+    const openvdb::GridCPtrVec whole{density, velocity};
+    vdbexport::detail::SealedLeaves sealer(/*half=*/true);
+    sealer.begin({"density", "velocity"});
+    auto sealGrid = [&](const auto& grid, int index, bool keepOneWhole) {
+        using GridT = typename std::decay_t<decltype(*grid)>;
+        auto out = openvdb::gridPtrCast<GridT>(grid->copyGridWithNewTree());
+        bool first = true;
+        for (auto it = grid->constTree().cbeginLeaf(); it; ++it) {
+            const std::uint32_t tag = sealer.seal(index, *it);
+            if (keepOneWhole && std::exchange(first, false)) out->tree().addLeaf(new typename GridT::TreeType::LeafNodeType(*it));
+            else out->tree().addLeaf(lic::topologyOnly(*it, tag).release());
+        }
+        return out;
+    };
+    const auto sealedDensity = sealGrid(density, 0, false);
+    const auto sealedVelocity = sealGrid(velocity, 1, false);
+    for (auto it = sealedDensity->constTree().cbeginLeaf(); it; ++it) ASSERT_FALSE(it->isAllocated());
+    openvdb::MetaMap meta;
+    meta.insertMeta("creator", openvdb::StringMetadata("licvdb test"));
+    const std::string ref = file("whole.vdb"), ours = file("sealed.vdb");
+    vdbexport::detail::writeVdbFile(ref, whole, meta);
+    vdbexport::detail::writeVdbFile(ours, {sealedDensity, sealedVelocity}, meta, vdbexport::detail::kWriteHoldBytes, &sealer);
+    const std::string a = fileBytes(ours), b = fileBytes(ref);
+    constexpr std::size_t kUuid = 21, kUuidEnd = 21 + 36;
+    ASSERT_EQ(a.size(), b.size());
+    EXPECT_EQ(a.substr(0, kUuid), b.substr(0, kUuid));
+    EXPECT_TRUE(a.substr(kUuidEnd) == b.substr(kUuidEnd)) << "sealed and whole leaves give different files";
+
+    // Records made for half floats, the grid now saved as float: refused, naming the grid.
+    sealedDensity->setSaveFloatAsHalf(false);
+    try {
+        vdbexport::detail::writeVdbFile(file("mismatch.vdb"), {sealedDensity}, meta, vdbexport::detail::kWriteHoldBytes, &sealer);
+        ADD_FAILURE() << "records made for half floats were written as floats";
+    } catch (const lic::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("'density'"), std::string::npos) << e.what();
+    }
+    // One whole leaf among sealed ones: refused.
+    const auto mixed = sealGrid(velocity, 1, true);
+    EXPECT_THROW(vdbexport::detail::writeVdbFile(file("mixed.vdb"), {mixed}, meta, vdbexport::detail::kWriteHoldBytes, &sealer),
+                 lic::Error);
 }
 
 // Names Archive would change (a repeated name) take io::File::write's path: still a readable

@@ -49,6 +49,8 @@ namespace io = openvdb::io;
 
 /// Leaves per chunk: a chunk is one task's work and one string (~80 KiB for dense float leaves).
 constexpr std::size_t kChunkLeaves = 64;
+/// Sealed records are written in runs of about this many bytes.
+constexpr std::size_t kRunBytes = std::size_t(4) << 20;
 
 /// A run of consecutive leaves' records (LeafNode::writeBuffers), and per leaf what the
 /// delayed-load table holds: the mask-compression kind and the compressed block's size.
@@ -284,10 +286,7 @@ private:
         gd.setBlockPos(os.tellp());
 
         if (sealed) {
-            for (std::size_t i = 0; i < n && os; ++i) {
-                const std::string& bytes = leaves.sealed(i, *sealed).bytes;
-                os.write(bytes.data(), std::streamsize(bytes.size()));
-            }
+            writeSealed(leaves, *sealed, os);
         } else if (hold) {
             for (Chunk& c : made) {
                 os.write(c.bytes.data(), std::streamsize(c.bytes.size()));
@@ -315,6 +314,24 @@ private:
             || grid.constTree().background() != openvdb::zeroVal<ValueT>())
             throw lic::Error("grid '" + grid.getName() + "' was sealed for another compression, precision or background");
         return sealed;
+    }
+
+    /// The sealed records of the grid's leaves, in the tree's order.
+    template<typename GridT>
+    static void writeSealed(const LeafRecords<GridT>& leaves, const SealedLeaves::Grid& sealed, std::ostream& os)
+    {
+        // Gathered into runs of ~4 MiB: a file stream writes small records through its 8 KiB
+        // buffer, a system call each time it fills.
+        std::string run;
+        run.reserve(kRunBytes + 65536);
+        const std::size_t n = leaves.leafCount();
+        for (std::size_t i = 0; i < n && os; ++i) {
+            run += leaves.sealed(i, sealed).bytes;
+            if (run.size() >= kRunBytes || i + 1 == n) {
+                os.write(run.data(), std::streamsize(run.size()));
+                run.clear();
+            }
+        }
     }
 
     /// The chunks made again on all cores and written in order, a few in flight at a time.
@@ -369,16 +386,20 @@ template<typename LeafT>
 std::uint32_t SealedLeaves::sealLeaf(int grid, const LeafT& leaf)
 {
     using ValueT = typename LeafT::ValueType;
+    static const ValueT background = openvdb::zeroVal<ValueT>();
+    // One stream per thread and value type, emptied for each leaf (a stream's construction costs
+    // about as much as compressing a sparse leaf).
+    thread_local std::ostringstream os(std::ios::out | std::ios::binary);
+    os.str(std::string());
+    os.clear();
     const std::uint32_t c = compression<ValueT>();
-    const ValueT background = openvdb::zeroVal<ValueT>();
-    std::ostringstream os(std::ios::out | std::ios::binary);
     io::setDataCompression(os, c);
     io::setGridBackgroundValuePtr(os, &background);
     LeafRecord r;
     r.origin = leaf.origin();
     std::tie(r.kind, r.size) = appendRecord(os, leaf, c, background, mHalf);
     if (!os) throw lic::Error("could not compress a leaf of grid '" + mGrids.at(std::size_t(grid))->name + "'");
-    r.bytes = std::move(os).str();
+    r.bytes = os.view();
     auto& records = mGrids.at(std::size_t(grid))->records;
     const auto at = records.push_back(std::move(r));
     const auto index = std::size_t(at - records.begin());
