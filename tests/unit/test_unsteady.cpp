@@ -31,6 +31,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 
 namespace fs = std::filesystem;
 
@@ -427,6 +428,42 @@ TEST_F(Unsteady, BitIdenticalForOneToThreeThreads)
         EXPECT_EQ(bytes[0], bytes[1]) << input;
         EXPECT_EQ(bytes[0], bytes[2]) << input;
     }
+}
+
+// A spot sequence's frames are stills: one process seals their leaves as the bricks finish
+// (vdbexport/io/SealedLeaves.h). Every frame file must be the one whole leaves give, byte for byte
+// but for the header's random UUID; noise frames keep whole leaves.
+TEST_F(Unsteady, SealedSpotFramesWriteTheFilesWholeLeavesWrite)
+{
+    auto fileBytes = [](const fs::path& path) {
+        std::ifstream in(path, std::ios::binary);
+        return std::string(std::istreambuf_iterator<char>(in), {});
+    };
+    vdbexport::Recipe r = tornado("sealed.vdb", "spots");
+    r.field.frames = std::array<int, 2>{2, 4};
+    r.output.half = true;
+    r.output.writeTangent = true;
+    std::vector<std::string> files[2];
+    for (const bool seal : {true, false}) {
+        if (seal) ::unsetenv("LICVDB_SEAL_LEAVES");
+        else ::setenv("LICVDB_SEAL_LEAVES", "0", 1);
+        const nlohmann::json s = vdbexport::bake(r); // the same paths both times (they are in the files)
+        ::unsetenv("LICVDB_SEAL_LEAVES");
+        ASSERT_EQ(s["per_frame"].size(), 3u);
+        for (const auto& f : s["per_frame"]) EXPECT_EQ(f["sealed_leaves"].get<bool>(), seal);
+        for (int f = 2; f <= 4; ++f) files[seal ? 0 : 1].push_back(fileBytes(sDir / ("sealed_000" + std::to_string(f) + ".vdb")));
+    }
+    constexpr std::size_t kUuid = 21, kUuidEnd = 21 + 36; // the header's random UUID
+    for (std::size_t f = 0; f < 3; ++f) {
+        const std::string &a = files[0][f], &b = files[1][f];
+        ASSERT_GT(a.size(), 1000u);
+        ASSERT_EQ(a.size(), b.size()) << "frame " << f + 2;
+        EXPECT_EQ(a.substr(0, kUuid), b.substr(0, kUuid));
+        EXPECT_TRUE(a.substr(kUuidEnd) == b.substr(kUuidEnd)) << "frame " << f + 2 << ": sealed and whole leaves differ";
+    }
+    vdbexport::Recipe noise = tornado("sealed_noise.vdb", "noise");
+    noise.field.frames = std::array<int, 2>{2, 3};
+    for (const auto& f : vdbexport::bake(noise)["per_frame"]) EXPECT_FALSE(f["sealed_leaves"].get<bool>());
 }
 
 TEST_F(Unsteady, BadSequencesAreRefusedAndWriteNothing)

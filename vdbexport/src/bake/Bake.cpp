@@ -21,7 +21,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cstdlib>
 #include <optional>
 #include <string>
 
@@ -177,8 +176,7 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     // finish, so the bake holds its compressed output instead of float leaves
     // (vdbexport/io/SealedLeaves.h). LICVDB_SEAL_LEAVES=0 keeps whole leaves (the same file).
     std::optional<detail::SealedLeaves> sealer;
-    const char* sealEnv = std::getenv("LICVDB_SEAL_LEAVES");
-    if (!job.distributed() && !(sealEnv && std::string(sealEnv) == "0")) sealer.emplace(recipe.output.half);
+    if (!job.distributed() && pipeline::sealingAllowed()) sealer.emplace(recipe.output.half);
     pipeline::FrameOptions frameOptions;
     frameOptions.sealer = sealer ? &*sealer : nullptr;
     FrameBake fb(plan, job, progress, std::move(frameOptions));

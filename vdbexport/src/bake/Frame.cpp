@@ -9,6 +9,8 @@
 #include <openvdb/openvdb.h>
 
 #include <chrono>
+#include <cstdlib>
+#include <string>
 
 namespace vdbexport::pipeline {
 
@@ -62,6 +64,12 @@ lic::CompositeInputs compositeInputs(const Plan& plan, lic::ScalarSet& scalars, 
 }
 
 } // namespace
+
+bool sealingAllowed()
+{
+    const char* env = std::getenv("LICVDB_SEAL_LEAVES");
+    return !(env && std::string(env) == "0");
+}
 
 Ranges bakeRanges(const Recipe& recipe, lic::ScalarSet& scalars, const lic::OutputDomain& domain,
                   std::optional<lic::Colormap>& cmap, const std::vector<std::uint32_t>* blocks,

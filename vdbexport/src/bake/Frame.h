@@ -68,6 +68,10 @@ struct FrameOptions
     lic::LeafSealer* sealer = nullptr;
 };
 
+/// Whether a one-process bake may seal a spot still's leaves (FrameOptions::sealer): yes unless
+/// the environment sets LICVDB_SEAL_LEAVES=0 (whole leaves; the same file).
+bool sealingAllowed();
+
 /// One frame baked up to its composited grids (call compositor->frame(f) to get them). Not
 /// copyable or movable: the compositor refers to the field, domain and input held here.
 class FrameBake

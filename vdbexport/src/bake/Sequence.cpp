@@ -11,6 +11,7 @@
 
 #include "vdbexport/io/FieldSequence.h"
 #include "vdbexport/io/OutputNames.h"
+#include "vdbexport/io/SealedLeaves.h"
 #include "vdbexport/io/VdbIO.h"
 
 #include "lic/engine/Engine.h"
@@ -319,13 +320,13 @@ struct SequenceState
 /// rank's leaves first (each frame's grids are its own: nothing is skipped) and stages, and every
 /// rank agrees on the outcome.
 void stageGathered(SequenceState& seq, FrameBake& fb, const Recipe& fr, const openvdb::MetaMap& meta, int number,
-                   openvdb::GridPtrVec& grids)
+                   openvdb::GridPtrVec& grids, const vdbexport::detail::SealedLeaves* sealed)
 {
     Job& job = seq.job;
     const std::string composing = "composing frame " + std::to_string(number);
     if (!job.distributed()) {
         grids = fb.compositor->frame(1);
-        stageFrame(fr, grids, meta, number, fr.output.path, seq.output);
+        stageFrame(fr, grids, meta, number, fr.output.path, seq.output, sealed);
         return;
     }
     if (job.root()) {
@@ -399,6 +400,10 @@ void bakeFrame(SequenceState& seq, int k, FrameProgress& progress)
     options.velocityScale = [&](const FieldShare& share) {
         return worldPerSecond(*share.loaded.velocity, seq.velocityUnit);
     };
+    // One process: a spot frame's leaves are sealed as its bricks finish (as a still's, Bake.cpp).
+    std::optional<vdbexport::detail::SealedLeaves> sealer;
+    if (!seq.job.distributed() && sealingAllowed()) sealer.emplace(fr.output.half);
+    options.sealer = sealer ? &*sealer : nullptr;
     FrameBake fb(plan, seq.job, progress, std::move(options));
     if (k == 0) seq.ranges = fb.ranges;
     seq.partMargin = std::max(seq.partMargin, fb.partMargin);
@@ -418,7 +423,7 @@ void bakeFrame(SequenceState& seq, int k, FrameProgress& progress)
     desc.densityMeta.insertMeta("licvdb_field_file", openvdb::StringMetadata(fs::path(fr.field.path).filename().string()));
     progress.begin("writing", 1);
     openvdb::GridPtrVec grids;
-    stageGathered(seq, fb, fr, desc.densityMeta, number, grids);
+    stageGathered(seq, fb, fr, desc.densityMeta, number, grids, fb.sealed ? &*sealer : nullptr);
     progress.advance(1);
     progress.end();
     seq.paths.push_back(fr.output.path);
@@ -432,6 +437,7 @@ void bakeFrame(SequenceState& seq, int k, FrameProgress& progress)
     seq.sumRead += t.read, seq.sumInput += t.input, seq.sumConvolve += t.convolve, seq.sumCompose += t.compose,
         seq.sumWrite += tWrite;
     seq.perFrame.push_back({{"frame", number},
+                            {"sealed_leaves", fb.sealed},
                             {"file", fs::path(fr.output.path).filename().string()},
                             {"output_voxels", fb.stats.voxels},
                             {"density_active_voxels", grids.front()->activeVoxelCount()},

@@ -417,14 +417,6 @@ const SealedLeaves::Grid* SealedLeaves::find(const std::string& name) const
     return nullptr;
 }
 
-std::uint64_t SealedLeaves::bytes() const
-{
-    std::uint64_t n = 0;
-    for (const auto& g : mGrids)
-        for (const LeafRecord& r : g->records) n += sizeof r + r.bytes.capacity();
-    return n;
-}
-
 void writeVdbFile(const std::string& path, const openvdb::GridCPtrVec& grids, const openvdb::MetaMap& fileMetadata,
                   std::uint64_t holdBytes, const SealedLeaves* sealed)
 {

@@ -52,8 +52,6 @@ public:
     bool half() const { return mHalf; }
     /// The records of grid `name`, or null if none were sealed for it.
     const Grid* find(const std::string& name) const;
-    /// Bytes held (records and their strings), for the bake's summary.
-    std::uint64_t bytes() const;
 
 private:
     template<typename LeafT>
