@@ -268,15 +268,8 @@ private:
         }
         copy->insertMeta(openvdb::GridBase::META_FILE_DELAYED_LOAD, *table);
         if (io::getWriteGridStatsMetadata(os)) {
-            copy->addStatsMetadata();
-            if (sealed) {
-                // The memory the leaves take with their values, as for the grid before sealing.
-                using LeafT = typename GridT::TreeType::LeafNodeType;
-                const LeafT whole(openvdb::Coord(0)), bare(openvdb::PartialCreate(), openvdb::Coord(0));
-                const auto mem = copy->template metaValue<openvdb::Int64>(openvdb::GridBase::META_FILE_MEM_BYTES);
-                copy->insertMeta(openvdb::GridBase::META_FILE_MEM_BYTES,
-                                 openvdb::Int64Metadata(mem + openvdb::Int64(n * (whole.memUsage() - bare.memUsage()))));
-            }
+            if (sealed) addSealedStats(*copy, grid);
+            else copy->addStatsMetadata();
             copy->insertMeta(openvdb::GridBase::META_FILE_COMPRESSION,
                              openvdb::StringMetadata(io::compressionToString(io::getDataCompression(os))));
         }
@@ -300,6 +293,33 @@ private:
         gd.writeStreamPos(os);
         gd.seekToEnd(os);
         io::setStreamMetadataPtr(os, fileMeta, /*transfer=*/false);
+    }
+
+    /// GridBase::addStatsMetadata's entries for a grid of topology-only leaves, read off their
+    /// masks (OpenVDB 13's evalActiveVoxelBoundingBox gives every leaf a buffer), with
+    /// file_mem_bytes as for the grid before sealing (the leaves' values counted).
+    template<typename GridT>
+    static void addSealedStats(openvdb::GridBase& copy, const GridT& grid)
+    {
+        using LeafT = typename GridT::TreeType::LeafNodeType;
+        if (grid.constTree().activeTileCount() > 0)
+            throw lic::Error("grid '" + grid.getName() + "' has sealed leaves and active tiles");
+        openvdb::CoordBBox bbox;
+        std::size_t n = 0;
+        for (auto it = grid.constTree().cbeginLeaf(); it; ++it, ++n) {
+            // From the mask alone (a leaf's value iterators touch its buffer in OpenVDB 13).
+            if (bbox.isInside(it->getNodeBoundingBox())) continue;
+            for (auto on = it->getValueMask().beginOn(); on; ++on) bbox.expand(it->offsetToGlobalCoord(on.pos()));
+        }
+        const LeafT whole(openvdb::Coord(0)), bare(openvdb::PartialCreate(), openvdb::Coord(0));
+        const auto mem = openvdb::Int64(grid.memUsage() + n * (whole.memUsage() - bare.memUsage()));
+        for (const char* key : {openvdb::GridBase::META_FILE_BBOX_MIN, openvdb::GridBase::META_FILE_BBOX_MAX,
+                                openvdb::GridBase::META_FILE_MEM_BYTES, openvdb::GridBase::META_FILE_VOXEL_COUNT})
+            copy.removeMeta(key);
+        copy.insertMeta(openvdb::GridBase::META_FILE_BBOX_MIN, openvdb::Vec3IMetadata(bbox.min().asVec3i()));
+        copy.insertMeta(openvdb::GridBase::META_FILE_BBOX_MAX, openvdb::Vec3IMetadata(bbox.max().asVec3i()));
+        copy.insertMeta(openvdb::GridBase::META_FILE_MEM_BYTES, openvdb::Int64Metadata(mem));
+        copy.insertMeta(openvdb::GridBase::META_FILE_VOXEL_COUNT, openvdb::Int64Metadata(openvdb::Int64(grid.activeVoxelCount())));
     }
 
     /// The sealed records of `grid` (null if it has none), checked against the stream state its
