@@ -115,20 +115,22 @@ Compositor::SpotVoxel Compositor::composeSpots(const Raw& raw, float widthT, flo
 template<typename Fn>
 void Compositor::forEachStillSet(Fn&& fn)
 {
-    // The names and order of frame() for a still composed on arrival, then buildStatic()'s.
+    // The names and order of frame() for a still composed on arrival, then buildStatic()'s. Each
+    // name is made only when asked for (sealLeaves), not on every brick's hand-over.
     int g = 0;
-    fn(g++, std::string("density"), mStill.density);
-    fn(g++, std::string("halo"), mStill.halo);
+    const auto named = [](const char* name) { return [name] { return std::string(name); }; };
+    fn(g++, named("density"), mStill.density);
+    fn(g++, named("halo"), mStill.halo);
     for (std::size_t k = 0; k < mStill.lines.size(); ++k) {
-        fn(g++, "density_w" + std::to_string(k + 1), mStill.lines[k]);
-        fn(g++, "halo_w" + std::to_string(k + 1), mStill.halos[k]);
+        fn(g++, [k] { return "density_w" + std::to_string(k + 1); }, mStill.lines[k]);
+        fn(g++, [k] { return "halo_w" + std::to_string(k + 1); }, mStill.halos[k]);
     }
-    if (mInputLeaves.enabled()) fn(g++, std::string("input"), mInputLeaves);
-    if (mTangentLeaves.enabled()) fn(g++, std::string("tangent"), mTangentLeaves);
-    if (mVelocityLeaves.enabled()) fn(g++, std::string("velocity"), mVelocityLeaves);
+    if (mInputLeaves.enabled()) fn(g++, named("input"), mInputLeaves);
+    if (mTangentLeaves.enabled()) fn(g++, named("tangent"), mTangentLeaves);
+    if (mVelocityLeaves.enabled()) fn(g++, named("velocity"), mVelocityLeaves);
     if (mColorLeaves.enabled()) {
-        fn(g++, std::string("color"), mColorLeaves);
-        fn(g++, std::string("scalar"), mScalarLeaves);
+        fn(g++, named("color"), mColorLeaves);
+        fn(g++, named("scalar"), mScalarLeaves);
     }
 }
 
@@ -136,7 +138,7 @@ bool Compositor::sealLeaves(LeafSealer* sealer)
 {
     if (!sealer || !mSettings.composesOnArrival() || mSettings.frames != 1) return false;
     std::vector<std::string> names;
-    forEachStillSet([&](int, const std::string& name, const auto&) { names.push_back(name); });
+    forEachStillSet([&](int, const auto& name, const auto&) { names.push_back(name()); });
     sealer->begin(names);
     mSealer = sealer;
     return true;
@@ -153,7 +155,7 @@ void Compositor::consume(const BrickChannels& bc)
     for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i) {
         if (bc.blockTouched && !bc.blockTouched[i]) continue;
         const std::size_t b = bc.brick->blocks[i];
-        forEachStillSet([&](int g, const std::string&, auto& set) { set.seal(b, *mSealer, g); });
+        forEachStillSet([&](int g, const auto&, auto& set) { set.seal(b, *mSealer, g); });
     }
 }
 

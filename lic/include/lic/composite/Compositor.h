@@ -170,7 +170,7 @@ private:
                        std::vector<LeafSet<openvdb::FloatGrid>>& lines, std::vector<LeafSet<openvdb::FloatGrid>>& halos);
     void buildStatic();
     /// fn(index, name, set) for each grid of a spot still composed on arrival, in frame(1)'s order:
-    /// the grids sealLeaves() seals.
+    /// the grids sealLeaves() seals. `name()` makes the grid's name (a string) when called.
     template<typename Fn>
     void forEachStillSet(Fn&& fn);
 
