@@ -431,6 +431,10 @@ TEST_F(VdbCheckTest, ForkServerChildOutcomes)
     EXPECT_GT(childPid, 0);
     EXPECT_NE(childPid, server);
     EXPECT_NE(childPid, ::getpid());
+    // Forked by an intermediate process that then exits: its parent is that process or, once
+    // handed over, this one (the subreaper); never the server.
+    EXPECT_GT(childParent, 0);
+    EXPECT_NE(childParent, server);
     // Refused: layer 1's reason, from the child's stderr.
     const std::string junk = (mDir / "junk.vdb").string();
     writeFile(junk, "not a vdb file at all, just some text that is long enough");

@@ -3,6 +3,8 @@
 
 #include "vdbexport/io/FieldInput.h"
 
+#include "Quote.h"
+
 #include <lic/util/Error.h>
 
 #include <bit>
@@ -12,8 +14,6 @@
 #include <string_view>
 
 namespace vdbexport::detail {
-
-inline std::string q(const std::string& s) { return "'" + s + "'"; }
 
 [[noreturn]] inline void inputError(const std::string& source, const std::string& what)
 {

@@ -1,9 +1,11 @@
 // The image functions of ImageIO.h. Those that need OpenImageIO or OpenColorIO run in the image
 // module (licvdb-image.so, ImageModule.cpp), loaded on first use: see ImageModuleApi.h.
 #include "vdbexport/io/ImageIO.h"
+
 #include "vdbexport/io/VdbIO.h"
 
 #include "ImageModuleApi.h"
+#include "Quote.h"
 
 #include <lic/util/Error.h>
 
@@ -18,7 +20,7 @@ namespace vdbexport {
 
 namespace {
 
-std::string quote(const std::string& s) { return "'" + s + "'"; }
+using detail::q;
 
 std::string lowerExtension(const std::string& path)
 {
@@ -35,8 +37,8 @@ std::string prepare(const std::string& path)
 {
     if (path.empty()) throw lic::InputError("cannot write an image with an empty path; expected a file name");
     if (formatFor(path).empty())
-        throw lic::InputError("cannot write " + quote(path) + ": unknown image extension " +
-                              quote(fs::path(path).extension().string()) + "; expected .png, .exr, .jpg, .tif or .gif");
+        throw lic::InputError("cannot write " + q(path) + ": unknown image extension " +
+                              q(fs::path(path).extension().string()) + "; expected .png, .exr, .jpg, .tif or .gif");
     return detail::prepareAtomicWrite(path);
 }
 
@@ -79,12 +81,12 @@ std::string findOcioConfig(const std::string& explicitPath)
     std::error_code ec;
     if (!explicitPath.empty()) {
         if (!fs::is_regular_file(explicitPath, ec))
-            throw lic::InputError("OCIO config " + quote(explicitPath) + " does not exist; expected a config.ocio file");
+            throw lic::InputError("OCIO config " + q(explicitPath) + " does not exist; expected a config.ocio file");
         return explicitPath;
     }
     if (const char* env = std::getenv(kOcioConfigEnv); env && *env) {
         if (!fs::is_regular_file(env, ec))
-            throw lic::InputError(std::string("$") + kOcioConfigEnv + " = " + quote(env) +
+            throw lic::InputError(std::string("$") + kOcioConfigEnv + " = " + q(env) +
                                   " does not exist; expected a config.ocio file");
         return env;
     }
@@ -123,8 +125,8 @@ bool isSceneLinearPath(const std::string& path)
 {
     const std::string f = formatFor(path);
     if (f.empty())
-        throw lic::InputError("unknown image extension " + quote(fs::path(path).extension().string()) + " in " +
-                              quote(path) + "; expected .png, .exr, .jpg, .tif or .gif");
+        throw lic::InputError("unknown image extension " + q(fs::path(path).extension().string()) + " in " +
+                              q(path) + "; expected .png, .exr, .jpg, .tif or .gif");
     return f == "openexr";
 }
 
@@ -139,12 +141,12 @@ void writeImageAtomic(const std::string& path, const lic::Image& image, const Di
 void writeGifAtomic(const std::string& path, const std::vector<lic::Image>& frames, const DisplayTransform& transform,
                     double fps)
 {
-    if (frames.empty()) throw lic::InputError("cannot write " + quote(path) + ": no frames");
+    if (frames.empty()) throw lic::InputError("cannot write " + q(path) + ": no frames");
     if (lowerExtension(path) != ".gif")
-        throw lic::InputError("cannot write an animation to " + quote(path) + "; expected a .gif path");
+        throw lic::InputError("cannot write an animation to " + q(path) + "; expected a .gif path");
     for (const auto& f : frames)
         if (f.width != frames[0].width || f.height != frames[0].height)
-            throw lic::InputError("cannot write " + quote(path) + ": frames differ in size");
+            throw lic::InputError("cannot write " + q(path) + ": frames differ in size");
     atomically(path, [&](const image_module::Api& api, const std::string& tmp) {
         return api.writeGif(path, tmp, frames, transform, fps);
     });

@@ -3,6 +3,8 @@
 // atomic write around these entries are in ImageIO.cpp.
 #include "ImageModuleApi.h"
 
+#include "Quote.h"
+
 #include <lic/util/Error.h>
 
 #include <OpenColorIO/OpenColorIO.h>
@@ -18,7 +20,7 @@ namespace vdbexport::image_module {
 
 namespace {
 
-std::string quote(const std::string& s) { return "'" + s + "'"; }
+using detail::q;
 
 /// Runs `body`, reporting its exceptions as a Status (none crosses into licvdb).
 template <typename F>
@@ -39,8 +41,8 @@ std::vector<float> display(const lic::Image& image, const DisplayTransform& t)
             config->getProcessor(OCIO::ROLE_SCENE_LINEAR, t.display.c_str(), t.view.c_str(), OCIO::TRANSFORM_DIR_FORWARD);
         cpu = proc->getDefaultCPUProcessor();
     } catch (const OCIO::Exception& e) {
-        throw lic::InputError("OCIO display transform (config " + quote(t.config) + ", display " + quote(t.display) +
-                              ", view " + quote(t.view) + "): " + e.what());
+        throw lic::InputError("OCIO display transform (config " + q(t.config) + ", display " + q(t.display) +
+                              ", view " + q(t.view) + "): " + e.what());
     }
     if (!rgb.empty()) {
         OCIO::PackedImageDesc desc(rgb.data(), image.width, image.height, 3);
@@ -66,10 +68,10 @@ void writeWithOiio(const std::string& path, const std::string& tmp, const std::v
                    const std::vector<const void*>& pixels)
 {
     auto out = OIIO::ImageOutput::create(formatFor(path));
-    if (!out) throw lic::Error("cannot write " + quote(path) + ": OpenImageIO has no writer for it (" + OIIO::geterror() + ")");
+    if (!out) throw lic::Error("cannot write " + q(path) + ": OpenImageIO has no writer for it (" + OIIO::geterror() + ")");
     const bool multi = specs.size() > 1;
     if (multi && !out->supports("multiimage"))
-        throw lic::Error("cannot write " + quote(path) + ": the format does not hold several images");
+        throw lic::Error("cannot write " + q(path) + ": the format does not hold several images");
     bool ok = multi ? out->open(tmp, int(specs.size()), specs.data()) : out->open(tmp, specs[0]);
     for (std::size_t i = 0; ok && i < specs.size(); ++i) {
         if (i > 0) ok = out->open(tmp, specs[i], OIIO::ImageOutput::AppendSubimage);
@@ -80,7 +82,7 @@ void writeWithOiio(const std::string& path, const std::string& tmp, const std::v
         const std::string msg = out->geterror();
         std::error_code ec;
         fs::remove(tmp, ec);
-        throw lic::Error("cannot write " + quote(path) + ": " + (msg.empty() ? std::string("write failed") : msg));
+        throw lic::Error("cannot write " + q(path) + ": " + (msg.empty() ? std::string("write failed") : msg));
     }
 }
 
@@ -143,11 +145,11 @@ Status readImageEntry(const std::string& path, lic::Image& image, std::string& c
 {
     return guarded([&] {
         auto in = OIIO::ImageInput::open(path);
-        if (!in) throw lic::InputError("cannot read image " + quote(path) + ": " + OIIO::geterror());
+        if (!in) throw lic::InputError("cannot read image " + q(path) + ": " + OIIO::geterror());
         const OIIO::ImageSpec& spec = in->spec();
         std::vector<float> buf(std::size_t(spec.width) * std::size_t(spec.height) * std::size_t(spec.nchannels));
         if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, buf.data()))
-            throw lic::InputError("cannot read image " + quote(path) + ": " + in->geterror());
+            throw lic::InputError("cannot read image " + q(path) + ": " + in->geterror());
         colorSpace = spec.get_string_attribute("oiio:ColorSpace");
         lic::Image img(spec.width, spec.height);
         const std::size_t nc = std::size_t(spec.nchannels);

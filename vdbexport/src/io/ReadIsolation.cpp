@@ -6,6 +6,8 @@
 // LICVDB_READ_CHILD=1 so that it reads in-process.
 #include "vdbexport/io/VdbCheck.h"
 
+#include "Quote.h"
+
 #include <lic/util/Error.h>
 
 #include <chrono>
@@ -39,7 +41,7 @@ namespace {
 std::mutex sExeMutex;
 std::string sExecutable, sVdbHelper;
 
-std::string quote(const std::string& s) { return "'" + s + "'"; }
+using detail::q;
 
 /// The child's reason: the text after "error: " on its first error line, else its whole stderr.
 std::string childReason(const std::string& err)
@@ -332,7 +334,7 @@ IsolatedCheck IsolatedCheck::start(const std::string& exe, const std::string& pa
 {
     int errPipe[2];
     if (::pipe2(errPipe, O_CLOEXEC) != 0)
-        throw lic::Error(std::string("cannot check ") + quote(path) + " in a child process: pipe failed ("
+        throw lic::Error(std::string("cannot check ") + q(path) + " in a child process: pipe failed ("
                          + std::strerror(errno) + ")");
     posix_spawn_file_actions_t actions;
     posix_spawn_file_actions_init(&actions);
@@ -357,7 +359,7 @@ IsolatedCheck IsolatedCheck::start(const std::string& exe, const std::string& pa
     ::close(errPipe[1]);
     if (rc != 0) {
         ::close(errPipe[0]);
-        throw lic::Error("cannot check " + quote(path) + " in a child process: starting " + quote(exe) + " failed ("
+        throw lic::Error("cannot check " + q(path) + " in a child process: starting " + q(exe) + " failed ("
                          + std::strerror(rc) + ")");
     }
     return adopt(pid, errPipe[0], path, reader, expected);
@@ -393,7 +395,7 @@ void IsolatedCheck::finish()
     mErrFd = -1;
     if (timedOut) {
         stop();
-        throw lic::InputError("reading " + quote(path) + " did not finish within " + std::to_string(int(limit))
+        throw lic::InputError("reading " + q(path) + " did not finish within " + std::to_string(int(limit))
                               + " s (in a child process, which was stopped); refused as corrupt; expected " + mExpected
                               + " (set LICVDB_READ_TIMEOUT=SECONDS for a very large file on a slow disk)");
     }
@@ -404,12 +406,12 @@ void IsolatedCheck::finish()
         if (w == mPid) break;
         if (w < 0 && errno != EINTR) {
             mPid = -1;
-            throw lic::Error("cannot check " + quote(path) + ": waiting for the child failed");
+            throw lic::Error("cannot check " + q(path) + ": waiting for the child failed");
         }
         const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         if (elapsed >= limit) {
             stop();
-            throw lic::InputError("reading " + quote(path) + " did not finish within " + std::to_string(int(limit))
+            throw lic::InputError("reading " + q(path) + " did not finish within " + std::to_string(int(limit))
                                   + " s (in a child process, which was stopped); refused as corrupt");
         }
         std::this_thread::sleep_for(std::chrono::milliseconds(5));
@@ -417,13 +419,13 @@ void IsolatedCheck::finish()
     mPid = -1; // reaped
     if (WIFSIGNALED(status)) {
         const int sig = WTERMSIG(status);
-        throw lic::InputError("reading " + quote(path) + " crashed " + mReader + " in a child process (signal "
+        throw lic::InputError("reading " + q(path) + " crashed " + mReader + " in a child process (signal "
                               + std::to_string(sig) + ": " + strsignal(sig) + "); the file is corrupt; expected " + mExpected);
     }
     const int code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
     if (code == 0) return;
     if (code == 2) throw lic::InputError(childReason(err));
-    throw lic::Error("checking " + quote(path) + " in a child process failed (exit " + std::to_string(code)
+    throw lic::Error("checking " + q(path) + " in a child process failed (exit " + std::to_string(code)
                      + "): " + childReason(err));
 }
 

@@ -5,6 +5,8 @@
 // count and size it meets against the file and against what the node can hold.
 #include "vdbexport/io/VdbCheck.h"
 
+#include "Quote.h"
+
 #include <lic/util/Error.h>
 
 #include <openvdb/openvdb.h>
@@ -34,7 +36,7 @@ namespace vdbexport {
 
 namespace {
 
-std::string quote(const std::string& s) { return "'" + s + "'"; }
+using detail::q;
 
 /// A refusal by the check: the marker and the rule's name (VdbCheck.h), then the message.
 lic::InputError refusal(const char* rule, const std::string& message)
@@ -153,7 +155,7 @@ public:
     {
         mFile = std::fopen(path.c_str(), "rb");
         if (!mFile)
-            throw refusal("open", "cannot open " + quote(path) + " for reading (" + std::strerror(errno)
+            throw refusal("open", "cannot open " + q(path) + " for reading (" + std::strerror(errno)
                                   + "); expected a readable .vdb file");
         // A buffer of our own: glibc's setvbuf ignores the size when given no buffer and keeps
         // its 4 KiB one, and every read or seek past it is a system call (some 4 300 for a
@@ -184,13 +186,13 @@ private:
     lic::InputError corrupt(const char* rule, const std::string& what) const
     {
         const std::string w = where();
-        return refusal(rule, quote(mPath) + " is corrupt: " + (w.empty() ? "" : w + ": ") + what + " (at byte "
+        return refusal(rule, q(mPath) + " is corrupt: " + (w.empty() ? "" : w + ": ") + what + " (at byte "
                                + std::to_string(mPos) + "); expected an intact OpenVDB .vdb file");
     }
     lic::InputError truncated(const char* rule, const std::string& what) const
     {
         const std::string w = where();
-        return refusal(rule, quote(mPath) + " is truncated or corrupt: " + (w.empty() ? "" : w + ": ") + what
+        return refusal(rule, q(mPath) + " is truncated or corrupt: " + (w.empty() ? "" : w + ": ") + what
                                + " (the file has " + std::to_string(mSize)
                                + " bytes); expected an intact OpenVDB .vdb file");
     }
@@ -297,18 +299,18 @@ void Checker::header(VdbCheckResult& r)
         read(head.data(), mSize, "header");
         if (!head.empty() && std::memcmp(head.data(), &expected, head.size()) == 0)
             throw truncated("header-short", "its header is cut short");
-        throw refusal("not-vdb-short", quote(mPath) + " is not an OpenVDB file (no VDB header); expected a .vdb file");
+        throw refusal("not-vdb-short", q(mPath) + " is not an OpenVDB file (no VDB header); expected a .vdb file");
     }
     magic = get<int64_t>("header");
     if (magic != expected)
-        throw refusal("not-vdb", quote(mPath) + " is not an OpenVDB file (no VDB header); expected a .vdb file");
+        throw refusal("not-vdb", q(mPath) + " is not an OpenVDB file (no VDB header); expected a .vdb file");
     if (left() < 4 + 4 + 4 + 1 + 36) throw truncated("header-cut-short", "its header is cut short");
     mVersion = get<uint32_t>("header");
     r.fileVersion = mVersion;
     r.libraryMajor = get<uint32_t>("header");
     r.libraryMinor = get<uint32_t>("header");
     if (mVersion < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION || mVersion > kNewestFileVersion)
-        throw refusal("version", quote(mPath) + " has VDB file format version " + std::to_string(mVersion)
+        throw refusal("version", q(mPath) + " has VDB file format version " + std::to_string(mVersion)
                               + " (written by OpenVDB " + std::to_string(r.libraryMajor) + "."
                               + std::to_string(r.libraryMinor) + "); licvdb reads versions "
                               + std::to_string(openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION) + " to "
@@ -332,7 +334,7 @@ Checker::MetaInfo Checker::metaMap()
     MetaInfo info;
     for (uint32_t i = 0; i < count; ++i) {
         const std::string name = string("a metadata name");
-        const Scope s(*this, "metadata " + quote(name));
+        const Scope s(*this, "metadata " + q(name));
         const std::string type = string("a metadata type name");
         const uint32_t bytes = get<uint32_t>("a metadata size");
         if (bytes > left())
@@ -374,7 +376,7 @@ void Checker::metadataValue(const std::string& name, const std::string& type, ui
     }
     // meta-type: unreachable with OpenVDB 10's own registrations (each registered type is in
     // metadataSizes(), a string or the delayed-load table): for types a program registers itself.
-    throw corrupt("meta-type", "metadata type " + quote(type) + " is not one licvdb can check");
+    throw corrupt("meta-type", "metadata type " + q(type) + " is not one licvdb can check");
 }
 
 /// DelayedLoadMetadata::readValue: count, a blosc block (or raw) of count int8 masks, then a
@@ -418,7 +420,7 @@ void Checker::delayedLoad(uint32_t bytes, int64_t& delayedCount)
 void Checker::transform(bool nested)
 {
     const std::string type = string("the transform's map type");
-    const Scope s(*this, "transform " + quote(type));
+    const Scope s(*this, "transform " + q(type));
     std::vector<double> v;
     const auto doubles = [&](int n) {
         for (int i = 0; i < n; ++i) v.push_back(get<double>("the transform"));
@@ -443,7 +445,7 @@ void Checker::transform(bool nested)
         doubles(8); // bounding box, taper, depth
         transform(/*nested=*/true); // the frustum's linear map
     } else {
-        throw corrupt("map-type", "map type " + quote(type) + " is not an OpenVDB map");
+        throw corrupt("map-type", "map type " + q(type) + " is not an OpenVDB map");
     }
     for (const double d : v)
         if (!std::isfinite(d)) throw corrupt("map-not-finite", "a value is not finite");
@@ -690,7 +692,7 @@ VdbCheckResult Checker::run()
         VdbGridCheck g;
         const std::string uniqueName = string("the grid name");
         g.name = openvdb::io::GridDescriptor::nameAsString(uniqueName);
-        const Scope ns(*this, "grid " + quote(g.name));
+        const Scope ns(*this, "grid " + q(g.name));
         g.gridType = string("the grid type");
         const std::string halfSuffix = "_HalfFloat"; // GridDescriptor.cc HALF_FLOAT_TYPENAME_SUFFIX
         if (g.gridType.size() > halfSuffix.size() && g.gridType.ends_with(halfSuffix)) {
@@ -704,25 +706,25 @@ VdbCheckResult Checker::run()
         const int64_t endPos = get<int64_t>("the grid offsets");
         if (!byUniqueName.emplace(uniqueName, r.grids.size()).second) throw corrupt("grid-name-twice", "the grid name appears twice");
         if (g.gridType.starts_with("Tree_half_"))
-            throw refusal("half-grid", "grid " + quote(g.name) + " is a half-precision grid (" + g.gridType
+            throw refusal("half-grid", "grid " + q(g.name) + " is a half-precision grid (" + g.gridType
                                        + ", OpenVDB 13's HalfGrid), which licvdb does not read: save it as a float grid "
                                        "(half-float storage, saveFloatAsHalf, is fine)");
         if (!openvdb::GridBase::isRegistered(g.gridType))
-            throw corrupt("grid-type", "grid type " + quote(g.gridType) + " is not an OpenVDB grid type");
+            throw corrupt("grid-type", "grid type " + q(g.gridType) + " is not an OpenVDB grid type");
         const auto spec = specs.find(g.gridType);
         if (g.instance) {
             const auto parent = byUniqueName.find(g.instanceParent);
             if (parent == byUniqueName.end() || r.grids[parent->second].instance
                 || r.grids[parent->second].gridType != g.gridType)
-                throw corrupt("instance-parent", "its instance parent " + quote(openvdb::io::GridDescriptor::nameAsString(g.instanceParent))
+                throw corrupt("instance-parent", "its instance parent " + q(openvdb::io::GridDescriptor::nameAsString(g.instanceParent))
                               + " is not an earlier grid of the same type");
         }
         if (hasOffsets) {
             if (endPos > int64_t(mSize))
-                throw truncated("grid-end", "grid " + quote(g.name) + " should end at byte " + std::to_string(endPos));
+                throw truncated("grid-end", "grid " + q(g.name) + " should end at byte " + std::to_string(endPos));
             // An instance has no tree: OpenVDB leaves its block offset 0.
             if (gridPos != int64_t(mPos) || endPos < gridPos || (!g.instance && (blockPos < gridPos || endPos < blockPos)))
-                throw truncated("grid-offsets", "grid " + quote(g.name) + " has inconsistent offsets");
+                throw truncated("grid-offsets", "grid " + q(g.name) + " has inconsistent offsets");
         }
         g.compression = get<uint32_t>("the grid's compression flags");
         using namespace openvdb::io;
@@ -751,7 +753,7 @@ VdbCheckResult Checker::run()
                                ? "point grids are not read by licvdb"
                                : "grid type " + g.gridType + " is not read by licvdb";
             if (!hasOffsets)
-                throw refusal("streamed-unsupported", quote(mPath) + " has grid " + quote(g.name) + " of type " + g.gridType
+                throw refusal("streamed-unsupported", q(mPath) + " has grid " + q(g.name) + " of type " + g.gridType
                                       + " in a streamed file (no grid offsets), which licvdb cannot skip: "
                                       + g.skipReason);
             seek(uint64_t(endPos));
@@ -804,16 +806,16 @@ VdbCheckResult checkVdbStructure(const std::string& path, VdbCheckDepth depth)
     struct stat st{};
     if (path.empty()) throw refusal("no-path", "no .vdb file given; expected a path to a .vdb file");
     if (::stat(path.c_str(), &st) != 0)
-        throw refusal("not-found", "file " + quote(path) + " not found; expected a .vdb file");
-    if (S_ISDIR(st.st_mode)) throw refusal("directory", quote(path) + " is a directory; expected a .vdb file");
+        throw refusal("not-found", "file " + q(path) + " not found; expected a .vdb file");
+    if (S_ISDIR(st.st_mode)) throw refusal("directory", q(path) + " is a directory; expected a .vdb file");
     if (S_ISREG(st.st_mode) && st.st_size == 0)
-        throw refusal("empty", "file " + quote(path) + " is empty (0 bytes); expected a .vdb file");
+        throw refusal("empty", "file " + q(path) + " is empty (0 bytes); expected a .vdb file");
     Checker checker(path, depth == VdbCheckDepth::Full);
     VdbCheckResult r = checker.run();
     if (depth == VdbCheckDepth::Layout) return r; // a file this process wrote from what it held
     const uint64_t limit = readMemoryLimitBytes();
     if (limit > 0 && r.memoryBytes > limit)
-        throw refusal("memory", quote(path) + " would need about " + std::to_string(r.memoryBytes >> 20)
+        throw refusal("memory", q(path) + " would need about " + std::to_string(r.memoryBytes >> 20)
                                     + " MiB of memory to read, more than the " + std::to_string(limit >> 20)
                                     + " MiB allowed (80 % of this machine's memory, or LICVDB_READ_MEMORY_MB)"
                                       "; refused as too large or corrupt");

@@ -1,6 +1,8 @@
 #include "vdbexport/io/VdbIO.h"
+
 #include "vdbexport/io/VdbCheck.h"
 #include "vdbexport/io/Sha256.h"
+#include "Quote.h"
 #include "VdbGridReader.h"
 
 #include <lic/util/Error.h>
@@ -43,7 +45,7 @@ namespace vdbexport {
 
 namespace {
 
-std::string quote(const std::string& s) { return "'" + s + "'"; }
+using detail::q;
 
 std::string cleanMessage(const char* what);
 
@@ -58,7 +60,7 @@ auto guardRead(const std::string& path, const char* what, Fn&& fn) -> decltype(f
     } catch (const lic::Error&) {
         throw;
     } catch (const std::exception& e) { // openvdb::Exception is a std::exception
-        throw lic::InputError("cannot read " + quote(path) + " (" + what + "): " + cleanMessage(e.what())
+        throw lic::InputError("cannot read " + q(path) + " (" + what + "): " + cleanMessage(e.what())
                               + "; expected an intact OpenVDB .vdb file (corrupt or truncated?)");
     }
 }
@@ -164,16 +166,16 @@ std::string prepareAtomicWrite(const std::string& path)
     if (dir.empty()) dir = ".";
     std::error_code ec;
     if (!fs::exists(dir, ec))
-        throw lic::InputError("cannot write " + quote(path) + ": directory " + quote(dir.string())
+        throw lic::InputError("cannot write " + q(path) + ": directory " + q(dir.string())
                               + " does not exist; create it first or choose another output path");
     if (!fs::is_directory(dir, ec))
-        throw lic::InputError("cannot write " + quote(path) + ": " + quote(dir.string())
+        throw lic::InputError("cannot write " + q(path) + ": " + q(dir.string())
                               + " is not a directory; expected an existing directory");
     if (::access(dir.c_str(), W_OK) != 0)
-        throw lic::InputError("cannot write " + quote(path) + ": directory " + quote(dir.string())
+        throw lic::InputError("cannot write " + q(path) + ": directory " + q(dir.string())
                               + " is not writable (" + std::strerror(errno) + ")");
     if (fs::is_directory(p, ec))
-        throw lic::InputError("cannot write " + quote(path)
+        throw lic::InputError("cannot write " + q(path)
                               + ": it is a directory; expected a file path");
     removeStaleTemporaries(path);
     return path + ".tmp-" + std::to_string(::getpid());
@@ -245,7 +247,7 @@ void commitAtomicWrite(const std::string& tmp, const std::string& path)
         const std::string reason = std::strerror(errno);
         if (fd >= 0) ::close(fd);
         fs::remove(tmp, ec);
-        throw lic::Error("cannot write " + quote(path) + ": flushing " + quote(tmp) + " failed ("
+        throw lic::Error("cannot write " + q(path) + ": flushing " + q(tmp) + " failed ("
                          + reason + ")");
     }
     ::close(fd);
@@ -253,7 +255,7 @@ void commitAtomicWrite(const std::string& tmp, const std::string& path)
     if (ec) {
         const std::string reason = ec.message();
         fs::remove(tmp, ec);
-        throw lic::Error("cannot write " + quote(path) + ": renaming " + quote(tmp) + " failed ("
+        throw lic::Error("cannot write " + q(path) + ": renaming " + q(tmp) + " failed ("
                          + reason + ")");
     }
 }
@@ -269,7 +271,7 @@ VdbReader::VdbReader(std::string path) : mPath(std::move(path))
     } catch (const lic::Error&) {
         throw;
     } catch (const std::exception& e) {
-        throw lic::InputError("cannot read " + quote(mPath) + ": " + cleanMessage(e.what()));
+        throw lic::InputError("cannot read " + q(mPath) + ": " + cleanMessage(e.what()));
     }
     mFile = std::make_unique<openvdb::io::File>(mPath);
     try {
@@ -282,9 +284,9 @@ VdbReader::VdbReader(std::string path) : mPath(std::move(path))
     } catch (const std::exception& e) {
         const std::string msg = cleanMessage(e.what());
         if (msg.find("not a VDB file") != std::string::npos)
-            throw lic::InputError(quote(mPath) + " is not an OpenVDB file (no VDB header); "
+            throw lic::InputError(q(mPath) + " is not an OpenVDB file (no VDB header); "
                                   "expected a .vdb file");
-        throw lic::InputError("cannot open " + quote(mPath) + " as a .vdb file: " + msg
+        throw lic::InputError("cannot open " + q(mPath) + " as a .vdb file: " + msg
                               + "; expected an intact OpenVDB .vdb file (corrupt or truncated?)");
     }
 }
@@ -309,17 +311,17 @@ std::vector<std::pair<std::string, std::string>> VdbReader::gridTypes()
 
 openvdb::GridBase::Ptr VdbReader::readGrid(const std::string& name)
 {
-    const std::string what = "reading grid " + quote(name);
+    const std::string what = "reading grid " + q(name);
     return guardRead(mPath, what.c_str(), [&] {
         for (const auto& g : mCheck.grids)
             if (g.name == name && !g.skipReason.empty())
-                throw lic::InputError("grid " + quote(name) + " in " + quote(mPath) + " (" + g.gridType
+                throw lic::InputError("grid " + q(name) + " in " + q(mPath) + " (" + g.gridType
                                       + ") cannot be read: " + g.skipReason);
         if (!mFile->hasGrid(name))
-            throw lic::InputError("grid " + quote(name) + " not found in " + quote(mPath)
+            throw lic::InputError("grid " + q(name) + " not found in " + q(mPath)
                                   + "; the file has: " + listGrids(gridTypes()));
         auto grid = mGrids ? mGrids->readGrid(name) : mFile->readGrid(name);
-        if (!grid) throw lic::InputError("grid " + quote(name) + " in " + quote(mPath) + " could not be read");
+        if (!grid) throw lic::InputError("grid " + q(name) + " in " + q(mPath) + " could not be read");
         return grid;
     });
 }
@@ -518,9 +520,9 @@ openvdb::Vec3SGrid::Ptr combineSplit(detail::VdbReader& reader, const std::strin
     openvdb::FloatGrid::Ptr comp[3];
     for (int a = 0; a < 3; ++a) {
         comp[a] = toFloat(reader.readGrid(base + sep + "xyz"[a]));
-        if (!comp[a]) throw lic::InputError("grid " + quote(base + sep + "xyz"[a]) + " in " + quote(reader.path()) + " is not a scalar grid");
+        if (!comp[a]) throw lic::InputError("grid " + q(base + sep + "xyz"[a]) + " in " + q(reader.path()) + " is not a scalar grid");
         if (!comp[a]->transform().isLinear())
-            throw lic::InputError("grid " + quote(base + sep + "xyz"[a]) + " in " + quote(reader.path()) + " has a non-linear transform");
+            throw lic::InputError("grid " + q(base + sep + "xyz"[a]) + " in " + q(reader.path()) + " has a non-linear transform");
     }
     auto out = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
     out->setTransform(comp[0]->transform().copy());
@@ -574,11 +576,11 @@ openvdb::Vec3SGrid::Ptr readVelocityGrid(const std::string& path, const std::str
                 if (chosenName) *chosenName = name;
                 return combineSplit(reader, name, sep);
             }
-            throw lic::InputError("grid " + quote(name) + " not found in " + quote(path)
+            throw lic::InputError("grid " + q(name) + " not found in " + q(path)
                                   + "; the file has: " + detail::listGrids(grids));
         }
         if (!detail::isVec3Type(it->second))
-            throw lic::InputError("grid " + quote(name) + " in " + quote(path) + " is a " + it->second
+            throw lic::InputError("grid " + q(name) + " in " + q(path) + " is a " + it->second
                                   + " grid; a " + it->second + " grid cannot be a velocity field "
                                   "(expected a Vec3 grid: vec3s, vec3d or vec3i)");
         chosen = name;
@@ -601,11 +603,11 @@ openvdb::Vec3SGrid::Ptr readVelocityGrid(const std::string& path, const std::str
                 return combineSplit(reader, split, sep);
             }
             if (vec3.empty())
-                throw lic::InputError(quote(path) + " has no Vec3 grid to use as a velocity field; "
+                throw lic::InputError(q(path) + " has no Vec3 grid to use as a velocity field; "
                                       "the file has: " + detail::listGrids(grids)
                                       + "; expected a vec3s, vec3d or vec3i grid");
             if (vec3.size() > 1)
-                throw lic::InputError(quote(path) + " has several Vec3 grids and none is named "
+                throw lic::InputError(q(path) + " has several Vec3 grids and none is named "
                                       "'velocity', 'vel' or 'v': " + detail::listGrids(vec3)
                                       + "; pass --grid NAME to choose one");
             chosen = vec3.front().first;
@@ -614,7 +616,7 @@ openvdb::Vec3SGrid::Ptr readVelocityGrid(const std::string& path, const std::str
 
     auto grid = toVec3S(reader.readGrid(chosen));
     if (!grid)
-        throw lic::InputError("grid " + quote(chosen) + " in " + quote(path)
+        throw lic::InputError("grid " + q(chosen) + " in " + q(path)
                               + " could not be read as a Vec3 grid");
     if (chosenName) *chosenName = chosen;
     return grid;
@@ -663,7 +665,7 @@ void OutputSet::discard(Staged& f)
 void OutputSet::refuseTwice(const std::string& path) const
 {
     for (const auto& f : mFiles)
-        if (f.path == path) throw lic::Error("cannot write " + quote(path) + " twice in one output set");
+        if (f.path == path) throw lic::Error("cannot write " + q(path) + " twice in one output set");
 }
 
 OutputSet::Staged OutputSet::stage(const std::string& path)
@@ -686,7 +688,7 @@ void OutputSet::finish(Staged& f)
     const int fd = f.fd >= 0 ? f.fd : ::open(f.named.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd < 0) {
         const std::string reason = std::strerror(errno);
-        throw lic::Error("cannot write " + quote(f.path) + ": flushing it failed (" + reason + ")");
+        throw lic::Error("cannot write " + q(f.path) + ": flushing it failed (" + reason + ")");
     }
     // fsync waits on the disk, not on a core (41 ms for the figure-12 file here): it runs on a
     // thread of its own while this one hashes the same bytes from the page cache.
@@ -702,7 +704,7 @@ void OutputSet::finish(Staged& f)
     }
     if (fd != f.fd) ::close(fd);
     if (syncError != 0)
-        throw lic::Error("cannot write " + quote(f.path) + ": flushing it failed (" + std::strerror(syncError) + ")");
+        throw lic::Error("cannot write " + q(f.path) + ": flushing it failed (" + std::strerror(syncError) + ")");
     if (hashFailed) std::rethrow_exception(hashFailed);
 }
 
@@ -729,7 +731,7 @@ void checkWritten(const std::string& path, const std::string& tmp, std::size_t g
     try {
         checkVdbStructure(tmp, VdbCheckDepth::Layout);
     } catch (const lic::InputError& e) {
-        throw lic::Error("cannot write " + quote(path) + ": the file written is incomplete (disk full?): "
+        throw lic::Error("cannot write " + q(path) + ": the file written is incomplete (disk full?): "
                          + e.what());
     }
     openvdb::io::File check(tmp);
@@ -737,7 +739,7 @@ void checkWritten(const std::string& path, const std::string& tmp, std::size_t g
     const auto written = check.readAllGridMetadata();
     check.close();
     if (!written || written->size() != gridCount)
-        throw lic::Error("cannot write " + quote(path) + ": only " + std::to_string(written ? written->size() : 0)
+        throw lic::Error("cannot write " + q(path) + ": only " + std::to_string(written ? written->size() : 0)
                          + " of " + std::to_string(gridCount) + " grids could be read back");
 }
 
@@ -752,7 +754,7 @@ OutputSet::Pending OutputSet::writeVdb(const std::string& path, openvdb::GridPtr
     try {
         for (std::size_t i = 0; i < grids.size(); ++i) {
             if (!grids[i])
-                throw lic::Error("cannot write " + quote(path) + ": grid #" + std::to_string(i)
+                throw lic::Error("cannot write " + q(path) + ": grid #" + std::to_string(i)
                                  + " is null; expected a grid");
             if (grids[i]->baseTree().activeTileCount() == 0) continue;
             // Voxelize a copy: the caller's grid keeps its (cheaper) tiles.
@@ -784,7 +786,7 @@ OutputSet::Pending OutputSet::writeVdb(const std::string& path, openvdb::GridPtr
         throw;
     } catch (const std::exception& e) {
         discard(f);
-        throw lic::Error("cannot write " + quote(path) + ": " + e.what());
+        throw lic::Error("cannot write " + q(path) + ": " + e.what());
     }
     return Pending(std::move(f));
 }
@@ -797,7 +799,7 @@ void OutputSet::addText(const std::string& path, const std::string& text)
         std::ofstream out(target(f), std::ios::binary | std::ios::trunc);
         if (out) out.write(text.data(), static_cast<std::streamsize>(text.size()));
         if (out) out.flush();
-        if (!out) throw lic::Error("cannot write " + quote(path) + " (" + std::strerror(errno) + ")");
+        if (!out) throw lic::Error("cannot write " + q(path) + " (" + std::strerror(errno) + ")");
         out.close();
         finish(f);
     } catch (...) {
@@ -811,7 +813,7 @@ std::string OutputSet::sha256(const std::string& path) const
 {
     for (const auto& f : mFiles)
         if (f.path == path) return f.sha256;
-    throw lic::Error("no file " + quote(path) + " in this output set");
+    throw lic::Error("no file " + q(path) + " in this output set");
 }
 
 void OutputSet::commit()
@@ -844,18 +846,18 @@ void OutputSet::commit()
                 const std::string link = f.path + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(n++);
                 fs::remove(link, ec);
                 if (::linkat(AT_FDCWD, fdPath(f.fd).c_str(), AT_FDCWD, link.c_str(), AT_SYMLINK_FOLLOW) != 0)
-                    throw lic::Error("cannot write " + quote(f.path) + ": linking its data failed (" + std::strerror(errno) + ")");
+                    throw lic::Error("cannot write " + q(f.path) + ": linking its data failed (" + std::strerror(errno) + ")");
                 fs::rename(link, f.path, ec);
                 if (ec) {
                     std::error_code ec2;
                     fs::remove(link, ec2);
-                    throw lic::Error("cannot write " + quote(f.path) + ": renaming failed (" + ec.message() + ")");
+                    throw lic::Error("cannot write " + q(f.path) + ": renaming failed (" + ec.message() + ")");
                 }
                 ::close(f.fd);
                 f.fd = -1;
             } else {
                 fs::rename(f.named, f.path, ec);
-                if (ec) throw lic::Error("cannot write " + quote(f.path) + ": renaming " + quote(f.named) + " failed (" + ec.message() + ")");
+                if (ec) throw lic::Error("cannot write " + q(f.path) + ": renaming " + q(f.named) + " failed (" + ec.message() + ")");
                 f.named.clear();
             }
             detail::commitHook("linked:" + std::to_string(&f - mFiles.data() + 1));

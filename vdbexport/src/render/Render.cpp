@@ -1,5 +1,7 @@
 #include "vdbexport/render/Render.h"
 
+#include "io/Quote.h"
+
 #include "vdbexport/io/Numbers.h"
 #include "vdbexport/io/VdbIO.h"
 
@@ -23,7 +25,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string quote(const std::string& s) { return "'" + s + "'"; }
+using detail::q;
 
 nlohmann::json vec(const openvdb::Vec3d& v) { return {v[0], v[1], v[2]}; }
 
@@ -47,7 +49,7 @@ openvdb::FloatGrid::Ptr readFloat(detail::VdbReader& reader, const std::string& 
         auto it = all.find(name);
         if (it != all.end()) return it->second;
     }
-    throw lic::InputError("grid '" + name + "' in " + quote(path) + " is " + type + "; expected a float grid");
+    throw lic::InputError("grid '" + name + "' in " + q(path) + " is " + type + "; expected a float grid");
 }
 
 openvdb::Vec3SGrid::Ptr readVec3(detail::VdbReader& reader, const std::string& path, const std::string& name,
@@ -56,7 +58,7 @@ openvdb::Vec3SGrid::Ptr readVec3(detail::VdbReader& reader, const std::string& p
     if (type == openvdb::typeNameAsString<openvdb::Vec3s>())
         return openvdb::gridPtrCast<openvdb::Vec3SGrid>(reader.readGrid(name));
     if (detail::isVec3Type(type)) return readVelocityGrid(path, name);
-    throw lic::InputError("grid '" + name + "' in " + quote(path) + " is " + type + "; expected a vec3s grid");
+    throw lic::InputError("grid '" + name + "' in " + q(path) + " is " + type + "; expected a vec3s grid");
 }
 
 LoadedVolume loadVolume(const std::string& path, bool wantHalo, bool wantScalar, bool wantTangent)
@@ -72,7 +74,7 @@ LoadedVolume loadVolume(const std::string& path, bool wantHalo, bool wantScalar,
     };
     const std::string dt = typeOf("density");
     if (dt.empty())
-        throw lic::InputError(quote(path) + " has no `density` grid (it has " + detail::listGrids(out.gridTypes) +
+        throw lic::InputError(q(path) + " has no `density` grid (it has " + detail::listGrids(out.gridTypes) +
                               "); expected a licvdb bake with a float grid `density`");
     out.volume.density = readFloat(reader, path, "density", dt);
     // Always read `halo` when present: with --halos off it still marks a line bake (auto density scale).
@@ -161,25 +163,25 @@ std::vector<std::string> renderInputs(const std::string& input, int frames)
     std::error_code ec;
     if (fs::path(input).extension() == ".json") {
         if (!fs::is_regular_file(input, ec))
-            throw lic::InputError("manifest " + quote(input) + " does not exist; expected a bake's manifest OUT.licvdb.json (or an older OUT.json) or a .vdb");
+            throw lic::InputError("manifest " + q(input) + " does not exist; expected a bake's manifest OUT.licvdb.json (or an older OUT.json) or a .vdb");
         nlohmann::json m;
         try {
             std::ifstream in(input);
             m = nlohmann::json::parse(in);
         } catch (const std::exception& e) {
-            throw lic::InputError("cannot read manifest " + quote(input) + ": " + e.what() +
+            throw lic::InputError("cannot read manifest " + q(input) + ": " + e.what() +
                                   "; expected the JSON manifest a bake writes");
         }
         if (!m.is_object() || !m.contains("files") || !m["files"].is_array() || m["files"].empty())
-            throw lic::InputError("manifest " + quote(input) + " has no `files` list; expected the JSON manifest a bake writes");
+            throw lic::InputError("manifest " + q(input) + " has no `files` list; expected the JSON manifest a bake writes");
         std::vector<std::string> files;
         for (const auto& f : m["files"]) {
-            if (!f.is_string()) throw lic::InputError("manifest " + quote(input) + ": `files` holds a non-string");
+            if (!f.is_string()) throw lic::InputError("manifest " + q(input) + ": `files` holds a non-string");
             const fs::path p(f.get<std::string>());
             files.push_back(p.is_absolute() ? p.string() : (fs::path(manifestDir(input)) / p).string());
         }
         if (frames > 0 && frames != int(files.size()))
-            throw lic::InputError("--frames " + std::to_string(frames) + " contradicts manifest " + quote(input) +
+            throw lic::InputError("--frames " + std::to_string(frames) + " contradicts manifest " + q(input) +
                                   ", which lists " + std::to_string(files.size()) + " files; omit --frames");
         return files;
     }
@@ -196,7 +198,7 @@ std::vector<std::string> renderInputs(const std::string& input, int frames)
         const std::string file = (p.parent_path() / (stem + suffix + p.extension().string())).string();
         if (!fs::exists(file, ec))
             throw lic::InputError("frame " + std::to_string(f) + " (" + std::to_string(f - first + 1) + " of " +
-                                  std::to_string(frames) + ", " + quote(file) + ") does not exist; expected a sequence " +
+                                  std::to_string(frames) + ", " + q(file) + ") does not exist; expected a sequence " +
                                   stem + "_" + std::string(4 - std::min<std::size_t>(4, std::to_string(first).size()), '0') +
                                   std::to_string(first) + p.extension().string() + " …");
         files.push_back(file);
