@@ -1,4 +1,5 @@
-"""licvdb: import LIC bakes (.vdb) with their look, play loops, bake LIC from smoke simulations.
+"""licvdb: import LIC bakes (.vdb) with their look, play loops, bake LIC from smoke simulations and
+from flow field files.
 
 Blender 3.4+ as a legacy add-on (``bl_info``), 4.2+ as an extension (``blender_manifest.toml``).
 This file only registers; the work is in the modules beside it.
@@ -9,16 +10,18 @@ bl_info = {
     "author": "licvdb authors",
     "version": (0, 1, 0),
     "blender": (3, 4, 0),
-    "location": "File > Import > licvdb bake (.vdb); View3D > Sidebar > licvdb",
-    "description": "Import 3D line integral convolution bakes, build their look, bake LIC from smoke",
+    "location": "File > Import > licvdb bake (.vdb), Bake LIC from flow file; View3D > Sidebar > licvdb",
+    "description": "Import 3D line integral convolution bakes, build their look, bake LIC from smoke and flow files",
     "category": "Import-Export",
 }
 
 import bpy
 
-from . import manifest, material, ops_bake, ops_import, panel, prefs, props  # noqa: F401 (public modules)
+from . import (engine, manifest, material, ops_bake, ops_bake_file, ops_import, panel, prefs,  # noqa: F401
+               props)  # (public modules)
 
-_classes = (*prefs.classes, *props.classes, *ops_import.classes, *ops_bake.classes, *panel.classes)
+_classes = (*prefs.classes, *props.classes, *ops_import.classes, *ops_bake.classes, *ops_bake_file.classes,
+            *panel.classes)
 
 
 def register():
@@ -26,9 +29,11 @@ def register():
         bpy.utils.register_class(cls)
     props.register_properties()
     bpy.types.TOPBAR_MT_file_import.append(ops_import.menu_import)
+    bpy.types.TOPBAR_MT_file_import.append(ops_bake_file.menu_bake_file)
 
 
 def unregister():
+    bpy.types.TOPBAR_MT_file_import.remove(ops_bake_file.menu_bake_file)
     bpy.types.TOPBAR_MT_file_import.remove(ops_import.menu_import)
     props.unregister_properties()
     for cls in reversed(_classes):

@@ -11,8 +11,10 @@ Blender, ``check_bake`` verifies
    then reads every grid in a child process (see docs/inputs.md), and exits 2 with the reason
    for a corrupt file.
 
-Without a licvdb executable (add-on preferences, ``$LICVDB_EXECUTABLE``, PATH) step 2 is
-skipped with a warning on the console; step 1 still runs.
+Without a licvdb executable (prefs.locate_executable: the add-on preferences,
+``$LICVDB_EXECUTABLE``, the engine the Linux extension carries, PATH, …) the import is refused
+with what to install or set, unless the user turned on the preference "Import without checking"
+(then step 2 is skipped with a note on the console; step 1 still runs).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import json
 import os
 import subprocess
 
-from . import prefs
+from . import engine, prefs
 
 #: Seconds one ``licvdb info --check`` may take (it has its own per-file limit as well).
 CHECK_TIMEOUT = 600
@@ -61,7 +63,7 @@ def check_vdb(path: str, executable: str) -> None:
     if the file is not intact (exit 2) or the check itself fails."""
     try:
         proc = subprocess.run([executable, "info", "--check", "--json", path], capture_output=True, text=True,
-                              timeout=CHECK_TIMEOUT, stdin=subprocess.DEVNULL)
+                              timeout=CHECK_TIMEOUT, stdin=subprocess.DEVNULL, env=engine.engine_env())
     except subprocess.TimeoutExpired:
         raise FileCheckError(f"checking {path} took longer than {CHECK_TIMEOUT} s; not importing it") from None
     except OSError as e:
@@ -89,7 +91,12 @@ def check_bake(context, files, man=None) -> None:
         verify_checksums(man.path, files)
     exe = prefs.find_executable(context)
     if exe is None:
-        print(f"licvdb: {prefs.missing_executable_message(context)}; importing without checking the files")
+        if not prefs.import_unchecked_allowed(context):
+            raise FileCheckError(f"not importing: the files cannot be checked before Blender reads them (a corrupt "
+                                 f".vdb can crash Blender). {prefs.missing_executable_message(context)}; or, at your "
+                                 "own risk, turn on \"Import without checking\" there")
+        print(f"licvdb: {prefs.missing_executable_message(context)}; importing without checking the files "
+              "(\"Import without checking\" is on)")
         return
     for path in files:
         check_vdb(path, exe)

@@ -20,6 +20,8 @@ What each guard is for, and where the facts come from, is in docs/blender.md, "B
   so there it is never half a voxel off. Measured by renders in 3.4.1 and 4.3.2
   (tests/blender/test_render.py); docs/blender.md, "Placement".
 - ``has_volume_velocity(volume)``: a Volume's velocity grid for Cycles motion blur (3.1+).
+- ``has_extension_user_folder()``: Blender 4.2+ gives each extension a writable user folder
+  (``bpy.utils.extension_path_user``); engine.py copies a read-only bundled engine there.
 """
 
 import bpy
@@ -84,3 +86,8 @@ def has_volume_velocity(volume) -> bool:
     """True where a Volume names its velocity grid for motion blur (``velocity_grid``,
     ``velocity_unit``, ``velocity_scale``: Blender 3.1+)."""
     return all(hasattr(volume, a) for a in ("velocity_grid", "velocity_unit", "velocity_scale"))
+
+
+def has_extension_user_folder() -> bool:
+    """True where extensions have a user folder (``bpy.utils.extension_path_user``, 4.2+)."""
+    return hasattr(bpy.utils, "extension_path_user")

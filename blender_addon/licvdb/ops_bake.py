@@ -1,9 +1,10 @@
-"""licvdb.bake_fluid: LIC from a Blender smoke simulation's OpenVDB cache.
+"""licvdb.bake_fluid: LIC from a Blender smoke simulation's OpenVDB cache; and what every bake
+operator shares (recipes from the scene's settings, BakeJob, BakeRunner).
 
 For the selected fluid domain (gas, cache format OpenVDB) this writes a recipe from the scene's
-bake settings, runs ``licvdb bake`` on the cache's ``velocity`` grid in a subprocess (one per
-simulation frame for a range), shows progress, can be cancelled with Esc, and imports the result
-placed on the domain.
+bake settings, runs ``licvdb bake`` on the cache's ``velocity`` grid in a subprocess (one
+coherent sequence for a frame range), shows progress, can be cancelled with Esc, and imports the
+result placed on the domain. ops_bake_file.py bakes a flow file the same way.
 """
 
 import json
@@ -19,7 +20,7 @@ import bpy
 from mathutils import Matrix, Vector
 
 from . import manifest as mf
-from . import ops_import, prefs, props
+from . import engine, ops_import, prefs, props
 
 
 class BakeError(Exception):
@@ -79,19 +80,40 @@ def domain_placement(obj, ds, cache_voxel: float) -> Matrix:
 
 # --- recipes and the subprocess -------------------------------------------------------------------
 
-def make_recipe(settings, field_path: str, out_path: str, loop_frames: int = 1) -> dict:
-    """The recipe JSON for one bake of ``field_path`` from the scene's bake settings."""
+def make_recipe(settings, field_path: str, out_path: str, loop_frames: int = 1, grid: str = "velocity") -> dict:
+    """The recipe JSON for one bake of ``field_path`` from the scene's bake settings; ``grid`` is
+    the field's vector grid ("" = licvdb's default choice)."""
     recipe = {
-        "field": {"path": field_path, "grid": "velocity"},
+        "field": {"path": field_path, "grid": grid},
         "output": {"path": out_path, "upsample": settings.upsample},
         "input": {"type": "noise", "seed": settings.seed},
         "lic": {"kernel": settings.kernel, "length": settings.length},
         "animation": {"frames": loop_frames},
         "threads": settings.threads,
     }
+    if not grid:
+        del recipe["field"]["grid"]
     if settings.color_scalar != "NONE":
         recipe["color"] = {"scalar": settings.color_scalar, "colormap": settings.colormap}
     return recipe
+
+
+def output_dir(settings, default: str) -> str:
+    """The bake settings' output folder, else ``default``; created. Raises BakeError."""
+    out_dir = bpy.path.abspath(settings.output_dir) if settings.output_dir else default
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as e:
+        raise BakeError(f"cannot create the output folder {out_dir}: {e.strerror}; set another one under "
+                        "Output in the licvdb panel") from None
+    return out_dir
+
+
+def new_bake_base(out_dir: str, stem: str) -> str:
+    """``out_dir/STEM_lic_TIME``: a new name for every bake (Blender does not notice a .vdb
+    overwritten in place)."""
+    run = time.strftime("%Y%m%d_%H%M%S") + f"_{int(time.time() * 1000) % 1000:03d}"
+    return os.path.join(out_dir, f"{bpy.path.clean_name(stem)}_lic_{run}")
 
 
 class BakeJob:
@@ -180,7 +202,8 @@ class BakeJob:
             with open(stderr_path, "wb") as child_err:
                 self.proc = subprocess.Popen([self.executable, "bake", "--recipe", recipe_path, "--json",
                                               "--progress", "lines"],
-                                             stdout=subprocess.PIPE, stderr=child_err, text=True)
+                                             stdout=subprocess.PIPE, stderr=child_err, text=True,
+                                             env=engine.engine_env())
         except OSError as e:
             self.error = f"cannot run {self.executable}: {e}; check the path in the add-on preferences"
             return
@@ -284,12 +307,8 @@ def plan_bake(context, obj):
     if missing:
         raise BakeError(f"no OpenVDB cache for frame {missing[0]} ({cache_data_file(ds, missing[0])}): bake "
                         "the simulation first (Physics > Fluid > Bake Data)")
-    out_dir = bpy.path.abspath(settings.output_dir) if settings.output_dir else os.path.join(
-        bpy.path.abspath(ds.cache_directory), "licvdb")
-    os.makedirs(out_dir, exist_ok=True)
-    # Every bake gets a new name: Blender does not notice a .vdb overwritten in place.
-    run = time.strftime("%Y%m%d_%H%M%S") + f"_{int(time.time() * 1000) % 1000:03d}"
-    base = os.path.join(out_dir, f"{bpy.path.clean_name(obj.name)}_lic_{run}")
+    out_dir = output_dir(settings, os.path.join(bpy.path.abspath(ds.cache_directory), "licvdb"))
+    base = new_bake_base(out_dir, obj.name)
     if len(frames) > 1:
         # One coherent unsteady sequence: the texture is carried by the smoke from frame to frame
         # (licvdb writes BASE_FFFF.vdb numbered as the cache, and one manifest).
@@ -332,12 +351,12 @@ def plan_bake(context, obj):
     return job, finish
 
 
-class LICVDB_OT_bake_fluid(bpy.types.Operator):
-    """Bake LIC from the selected smoke domain's OpenVDB cache (current frame, or a frame range) and import it"""
-
-    bl_idname = "licvdb.bake_fluid"
-    bl_label = "Bake LIC from fluid"
-    bl_options = {"REGISTER", "UNDO"}
+class BakeRunner:
+    """What the bake operators share (a mix-in before ``bpy.types.Operator``): the subclass's
+    ``plan(context)`` returns ``(BakeJob, finish)`` or raises BakeError; ``run_blocking`` runs the
+    job to its end (execute: scripts, background mode), ``run_modal`` runs it from a timer with a
+    progress bar and status text, Esc cancelling (invoke). ``finish(context)`` imports the
+    result and returns the new object; every failure is reported."""
 
     timeout: bpy.props.FloatProperty(name="Timeout", default=0.0, min=0.0, options={"SKIP_SAVE"},
                                      description="Blocking runs only: give up after this many seconds (0 = never)")
@@ -346,13 +365,12 @@ class LICVDB_OT_bake_fluid(bpy.types.Operator):
     _job = None
     _finish = None
 
-    @classmethod
-    def poll(cls, context):
-        return fluid_domain(context.active_object) is not None
+    def plan(self, context):
+        raise NotImplementedError
 
-    def _start(self, context):
+    def _start(self, context) -> bool:
         try:
-            self._job, self._finish = plan_bake(context, context.active_object)
+            self._job, self._finish = self.plan(context)
         except BakeError as e:
             self.report({"ERROR"}, str(e))
             return False
@@ -375,13 +393,13 @@ class LICVDB_OT_bake_fluid(bpy.types.Operator):
         self.report({"INFO"}, f"licvdb: baked and imported {obj.name} in {time.monotonic() - job.started:.1f} s")
         return {"FINISHED"}
 
-    def execute(self, context):  # blocking (scripts, background mode)
+    def run_blocking(self, context):
         if not self._start(context):
             return {"CANCELLED"}
         self._job.run(timeout=self.timeout or None)
         return self._complete(context)
 
-    def invoke(self, context, event):  # interactive: modal with a timer, Esc cancels
+    def run_modal(self, context):
         if not self._start(context):
             return {"CANCELLED"}
         self._job.start()
@@ -424,6 +442,27 @@ class LICVDB_OT_bake_fluid(bpy.types.Operator):
         if self._job is not None:
             self._job.cancel()
         self._end(context)
+
+
+class LICVDB_OT_bake_fluid(BakeRunner, bpy.types.Operator):
+    """Bake LIC from the selected smoke domain's OpenVDB cache (current frame, or a frame range) and import it"""
+
+    bl_idname = "licvdb.bake_fluid"
+    bl_label = "Bake LIC from fluid"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return fluid_domain(context.active_object) is not None
+
+    def plan(self, context):
+        return plan_bake(context, context.active_object)
+
+    def execute(self, context):  # blocking (scripts, background mode)
+        return self.run_blocking(context)
+
+    def invoke(self, context, event):  # interactive: modal with a timer, Esc cancels
+        return self.run_modal(context)
 
 
 classes = (LICVDB_OT_bake_fluid,)

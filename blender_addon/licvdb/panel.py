@@ -1,5 +1,5 @@
 """The N-panel (3D view sidebar, tab "licvdb"): the look of the active bake, and baking from a
-fluid domain."""
+fluid domain (or from a flow file, with the same settings)."""
 
 import bpy
 
@@ -86,6 +86,7 @@ class LICVDB_PT_bake(bpy.types.Panel):
         layout.prop(s, "output_dir")
         layout.prop(s, "threads")
         layout.operator("licvdb.bake_fluid", icon="RENDER_STILL")
+        layout.operator("licvdb.bake_file", text="Bake LIC from flow file…", icon="FILEBROWSER")
 
 
 classes = (LICVDB_PT_look, LICVDB_PT_bake)

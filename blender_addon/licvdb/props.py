@@ -136,7 +136,8 @@ class LICVDB_BakeSettings(bpy.types.PropertyGroup):
     frame_start: bpy.props.IntProperty(name="Start", default=1, min=0)
     frame_end: bpy.props.IntProperty(name="End", default=10, min=0)
     output_dir: bpy.props.StringProperty(name="Output", subtype="DIR_PATH", default="",
-                                         description="Where bakes go; empty = a licvdb folder in the fluid cache")
+                                         description="Where bakes go; empty = a licvdb folder in the fluid cache "
+                                                     "(or beside the flow file)")
     threads: bpy.props.IntProperty(name="Threads", default=0, min=0, max=1024, description="0 = all cores")
 
 

@@ -47,6 +47,11 @@ def test_file_handler_guard():
         assert [c.__name__ for c in ops_import.classes] == ["LICVDB_OT_import_bake"]
 
 
+def test_extension_user_folder_guard():
+    """4.2+ extensions have a user folder (engine.py copies a read-only bundled engine there)."""
+    assert compat.has_extension_user_folder() == (bpy.app.version >= (4, 2, 0))
+
+
 # --- use_nodes (deprecated in 5.0) ----------------------------------------------------------------
 
 def test_use_nodes_guard_matches_this_blender():

@@ -1,5 +1,6 @@
 """Finding the licvdb executable (issue 17): preferences, $LICVDB_EXECUTABLE, PATH, install
-folders, a source build tree; and saying in the UI when none works.
+folders, a source build tree; and saying in the UI when none works. (The engine the Linux
+extension carries, which comes before PATH: test_engine.py.)
 
 The environment (PATH, HOME, LICVDB_EXECUTABLE) is changed per test with monkeypatch; the
 executables are real files (a link to the licvdb under test, or a non-executable file)."""
@@ -9,7 +10,7 @@ import os
 import bpy
 import pytest
 
-from licvdb import prefs
+from licvdb import engine, prefs
 
 from conftest import licvdb_exe
 from test_addon import RecordingLayout, draw_panel
@@ -21,8 +22,9 @@ LICVDB = licvdb_exe()
 
 @pytest.fixture
 def clean_env(monkeypatch, tmp_path):
-    """No preference, no $LICVDB_EXECUTABLE, an empty PATH and HOME, no install folder or build
-    tree: nothing to find until a test puts licvdb somewhere."""
+    """No preference, no $LICVDB_EXECUTABLE, no bundled engine (the add-on's folder is
+    ``tmp_path/package``, empty), an empty PATH and HOME, no install folder or build tree: nothing
+    to find until a test puts licvdb somewhere."""
     monkeypatch.delenv("LICVDB_EXECUTABLE", raising=False)
     empty = tmp_path / "empty"
     empty.mkdir()
@@ -30,6 +32,8 @@ def clean_env(monkeypatch, tmp_path):
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
     monkeypatch.setattr(prefs, "_EXTRA_BIN_DIRS", ("~/.local/bin",))
     monkeypatch.setattr(prefs, "_BUILD_DIRS", ())
+    (tmp_path / "package").mkdir()
+    monkeypatch.setattr(engine, "PACKAGE_DIR", str(tmp_path / "package"))
     p = bpy.context.preferences.addons["licvdb"].preferences
     assert p.executable == ""
     yield tmp_path
@@ -98,7 +102,8 @@ def test_wrong_environment_variable_is_reported_not_skipped(clean_env, monkeypat
 def test_nothing_found_says_what_was_tried(clean_env):
     assert prefs.find_executable() is None
     msg = prefs.missing_executable_message()
-    for part in ("preferences: empty", "$LICVDB_EXECUTABLE: unset", "PATH: no licvdb", "~/.local/bin",
+    for part in ("preferences: empty", "$LICVDB_EXECUTABLE: unset", "bundled engine: none in this add-on",
+                 "PATH: no licvdb", "~/.local/bin", "licvdb-VERSION-blender-linux-x64.zip",
                  "Preferences > Add-ons > licvdb"):
         assert part in msg, (part, msg)
 

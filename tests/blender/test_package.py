@@ -1,6 +1,7 @@
-"""The add-on's zips (scripts/package-addon): the 4.2+ extension zip's layout and manifest, and the
-legacy zip installed and enabled the 3.x way (Preferences > Add-ons > Install…, which 4.2+ keeps
-as "Install legacy Add-on").
+"""The add-on's zips (scripts/package-addon): the 4.2+ extension zip's layout and manifest, the
+Linux extension zip that carries an engine (``--engine BUNDLE_DIR``), and the legacy zip
+installed and enabled the 3.x way (Preferences > Add-ons > Install…, which 4.2+ keeps as
+"Install legacy Add-on").
 
 The extension zip is checked here against the rules of Blender 4.2's extension tooling
 (docs/blender.md lists them), so that Blender 3.4 checks it too; test_extension.py installs it
@@ -32,6 +33,7 @@ ADDON_TAGS = {"3D View", "Add Curve", "Add Mesh", "Animation", "Bake", "Camera",
               "Material", "Modeling", "Mesh", "Node", "Object", "Paint", "Pipeline", "Physics", "Render",
               "Rigging", "Scene", "Sculpt", "Sequencer", "System", "Text Editor", "Tracking",
               "User Interface", "UV"}
+PLATFORMS = {"windows-x64", "windows-arm64", "macos-x64", "macos-arm64", "linux-x64"}
 SEMVER = re.compile(r"^(0|[1-9]\d*)\.(0|[1-9]\d*)\.(0|[1-9]\d*)(-[0-9A-Za-z.-]+)?(\+[0-9A-Za-z.-]+)?$")
 
 
@@ -80,6 +82,9 @@ def manifest_errors(m):
     for tag in m.get("tags", []):
         if tag not in ADDON_TAGS:
             errors.append(f"tag {tag!r} is not one of Blender's add-on tags")
+    platforms = m.get("platforms", ["linux-x64"])  # optional: absent = every platform
+    if not isinstance(platforms, list) or not platforms or not set(platforms) <= PLATFORMS:
+        errors.append(f"platforms {platforms!r} must be a non-empty list of {sorted(PLATFORMS)}")
     perms = m.get("permissions", {})
     if not isinstance(perms, dict):
         errors.append("permissions must be a table")
@@ -132,9 +137,72 @@ def test_manifest_checker_catches_bad_manifests():
         good = tomllib.load(f)
     bad = [dict(good, tagline="Ends with a period."), dict(good, id="lic__vdb"), dict(good, type="addon"),
            dict(good, blender_version_min="4.1.0"), dict(good, tags=["Flow"]), dict(good, license="GPL"),
-           dict(good, permissions={"files": "x" * 65}), {k: v for k, v in good.items() if k != "maintainer"}]
+           dict(good, permissions={"files": "x" * 65}), {k: v for k, v in good.items() if k != "maintainer"},
+           dict(good, platforms=["linux"]), dict(good, platforms="linux-x64"), dict(good, platforms=[])]
     for m in bad:
         assert manifest_errors(m), m
+
+
+BUNDLE = {"bin/licvdb": b"#!/bin/sh\nexec \"$(dirname \"$0\")/../lib/ld-linux-x86-64.so.2\" \"$@\"\n",
+          "lib/ld-linux-x86-64.so.2": b"loader", "lib/libopenvdb.so.10.0": b"library",
+          "libexec/licvdb/licvdb": b"program", "share/licvdb/ocio/config.ocio": b"ocio_profile_version: 2\n",
+          "EXECUTABLES": b"bin/licvdb\nlib/ld-linux-x86-64.so.2\nlibexec/licvdb/licvdb\n"}
+
+
+def make_bundle(d, version):
+    """A small stand-in for scripts/bundle's folder (layout only: nothing in it is run)."""
+    for rel, content in {**BUNDLE, "VERSION": f"{version}\n".encode()}.items():
+        path = d / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(content)
+    for rel in ("bin/licvdb", "lib/ld-linux-x86-64.so.2", "libexec/licvdb/licvdb"):
+        os.chmod(d / rel, 0o755)
+    (d / "share" / "licvdb" / "__pycache__").mkdir()
+    (d / "share" / "licvdb" / "__pycache__" / "x.pyc").write_bytes(b"")
+    return d
+
+
+def test_engine_zip_carries_the_bundle_for_linux(tmp_path):
+    version = ".".join(map(str, licvdb.bl_info["version"]))
+    bundle = make_bundle(tmp_path / "bundle", version)
+    out = tmp_path / "zips"
+    proc = subprocess.run([os.path.join(ROOT, "scripts", "package-addon"), "--engine", str(bundle), str(out)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(os.listdir(out)) == [f"licvdb-{version}-blender-linux-x64.zip", "licvdb-blender-addon.zip",
+                                       "licvdb-blender-extension.zip"]
+    with zipfile.ZipFile(out / f"licvdb-{version}-blender-linux-x64.zip") as z:
+        names = z.namelist()
+        manifest = tomllib.loads(z.read("blender_manifest.toml").decode("utf-8"))
+        modes = {n: (z.getinfo(n).external_attr >> 16) & 0o777 for n in names}
+    assert sorted(n for n in names if not n.startswith("engine/")) == package_files()
+    assert sorted(n for n in names if n.startswith("engine/")) == sorted(
+        "engine/" + rel for rel in [*BUNDLE, "VERSION"])
+    assert manifest["platforms"] == ["linux-x64"]
+    assert manifest_errors(manifest) == []
+    with open(os.path.join(PKG, "blender_manifest.toml"), "rb") as f:
+        source = tomllib.load(f)
+    assert {k: v for k, v in manifest.items() if k != "platforms"} == source
+    assert modes["engine/bin/licvdb"] == 0o755  # kept in the zip (Blender's installer drops them)
+    # The platform-neutral extension zip is unchanged: no engine, no platforms.
+    with zipfile.ZipFile(out / "licvdb-blender-extension.zip") as z:
+        assert sorted(z.namelist()) == package_files()
+        assert "platforms" not in tomllib.loads(z.read("blender_manifest.toml").decode("utf-8"))
+
+
+def test_engine_that_is_not_a_bundle_is_refused(tmp_path):
+    bundle = make_bundle(tmp_path / "bundle", "0.1.0")
+    (bundle / "libexec" / "licvdb" / "licvdb").unlink()
+    script = os.path.join(ROOT, "scripts", "package-addon")
+    proc = subprocess.run([script, "--engine", str(bundle), str(tmp_path / "zips")], capture_output=True, text=True)
+    assert proc.returncode == 2 and "libexec/licvdb/licvdb" in proc.stderr, proc.stderr
+    assert not os.path.exists(tmp_path / "zips") or not os.listdir(tmp_path / "zips"), "nothing written"
+    proc = subprocess.run([script, "--engine", str(tmp_path / "none"), str(tmp_path / "zips")],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2 and "is not a folder" in proc.stderr, proc.stderr
+    (bundle / "EXECUTABLES").unlink()
+    proc = subprocess.run([script, "--engine", str(bundle), str(tmp_path / "zips")], capture_output=True, text=True)
+    assert proc.returncode == 2 and "no EXECUTABLES" in proc.stderr, proc.stderr
 
 
 def test_package_imports_are_relative():

@@ -1,5 +1,6 @@
-"""licvdb.import_bake's invoke, as File > Import starts it: in a window, not nested in a Python
-operator call (``undo=True``), so Blender restores the operator's last-used properties."""
+"""licvdb.import_bake's (and licvdb.bake_file's) invoke, as File > Import starts it: in a window,
+not nested in a Python operator call (``undo=True``), so Blender restores the operator's
+last-used properties."""
 
 import bpy
 
@@ -30,3 +31,12 @@ def test_second_import_from_the_menu_opens_the_file_browser(bakes, view3d):
     result = bpy.ops.licvdb.import_bake("INVOKE_DEFAULT", True)
     assert result == {"RUNNING_MODAL"}, f"{result}: the previous file was imported again"
     assert volumes() == ["first"]
+
+
+def test_bake_from_flow_file_menu_opens_the_file_browser(bakes, view3d):
+    """File > Import > Bake LIC from flow file… starts licvdb.bake_file without a file: invoke
+    opens the file browser (the bake starts, modal, once a file is chosen) and bakes nothing yet."""
+    result = bpy.ops.licvdb.bake_file("INVOKE_DEFAULT", True)
+    assert result == {"RUNNING_MODAL"}, result
+    assert volumes() == []
+    assert not (bakes / "licvdb").exists()

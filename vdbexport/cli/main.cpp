@@ -8,6 +8,7 @@
 #include "Command.h"
 
 #include "vdbexport/bake/Distributed.h"
+#include "vdbexport/io/Program.h"
 #include "vdbexport/io/VdbCheck.h"
 #include "vdbexport/io/VdbIO.h"
 
@@ -19,7 +20,6 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdlib>
-#include <filesystem>
 #include <iostream>
 #include <new>
 #include <vector>
@@ -27,14 +27,6 @@
 namespace {
 
 using namespace vdbexport::cli;
-
-/// This program's path (/proc/self/exe), "" if it cannot be found.
-std::string selfExecutable()
-{
-    std::error_code ec;
-    const auto p = std::filesystem::read_symlink("/proc/self/exe", ec);
-    return ec ? std::string() : p.string();
-}
 
 /// A command of the table, added to the program as a subcommand.
 struct Registered
@@ -80,8 +72,11 @@ int main(int argc, char** argv)
     // Layer 2 of the .vdb read defences: every read first runs in a child `licvdb info --check`
     // (for a .vdb, licvdb-readcheck where it is installed: it starts faster than licvdb).
     if (!inReadChild()) {
-        const std::string self = selfExecutable();
-        vdbexport::setReadIsolation(self, vdbexport::findVdbReadHelper(self));
+        // From a bundle, children start through its launcher (bin/licvdb), which runs them with the
+        // bundle's loader; licvdb-readcheck would start with the host's loader, so it is not used.
+        const std::string self = vdbexport::program::restartPath();
+        vdbexport::setReadIsolation(self, vdbexport::program::inBundle() ? std::string()
+                                                                          : vdbexport::findVdbReadHelper(self));
     }
     // Layer 2's checks are forked from a server process made now, while this process runs no
     // thread of its own yet (TBB starts with the command; log4cplus, which OpenVDB links, has

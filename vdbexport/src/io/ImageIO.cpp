@@ -2,6 +2,7 @@
 // module (licvdb-image.so, ImageModule.cpp), loaded on first use: see ImageModuleApi.h.
 #include "vdbexport/io/ImageIO.h"
 
+#include "vdbexport/io/Program.h"
 #include "vdbexport/io/VdbIO.h"
 
 #include "ImageModuleApi.h"
@@ -91,10 +92,11 @@ std::string findOcioConfig(const std::string& explicitPath)
         return env;
     }
     std::vector<fs::path> candidates;
-    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-    if (!ec) {
+    const fs::path exe = program::path();
+    if (!exe.empty()) {
         const fs::path dir = exe.parent_path();
         candidates.push_back(dir / ".." / "share" / "licvdb" / "ocio" / "config.ocio");
+        candidates.push_back(dir / ".." / ".." / "share" / "licvdb" / "ocio" / "config.ocio"); // libexec/licvdb/
         candidates.push_back(dir / ".." / ".." / "share" / "ocio" / "config.ocio");
     }
 #ifdef LICVDB_OCIO_CONFIG_DEFAULT

@@ -2,6 +2,7 @@
 #include "Module.h"
 
 #include "DenseCommon.h"
+#include "vdbexport/io/Program.h"
 
 #include <filesystem>
 #include <map>
@@ -20,9 +21,8 @@ std::vector<fs::path> candidates(const Spec& spec)
 {
     if (const char* env = std::getenv(spec.envVar); env && *env) return {env};
     std::vector<fs::path> out;
-    std::error_code ec;
-    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-    if (!ec) {
+    const fs::path exe = program::path();
+    if (!exe.empty()) {
         out.push_back(exe.parent_path() / spec.id.fileName);
         out.push_back(exe.parent_path() / ".." / "libexec" / "licvdb" / spec.id.fileName);
     }
