@@ -5,7 +5,8 @@
 # What the Blender chroots need: Blender and the add-on's test tools in both; sid's blender 5.2.2
 # does not depend on python3-cattr and python3-requests, without which its extension system does
 # not load.
-BLENDER_PKGS=(blender python3-pytest python3-numpy python3-openvdb xvfb xauth libgl1-mesa-dri)
+BLENDER_PKGS=(blender python3-pytest python3-numpy python3-openvdb xvfb xauth libgl1-mesa-dri
+  e2fsprogs) # chattr: test_engine.py makes a folder read-only for root
 TRIXIE_PKGS=("${BLENDER_PKGS[@]}")
 SID_PKGS=("${BLENDER_PKGS[@]}" python3-cattr python3-requests)
 
