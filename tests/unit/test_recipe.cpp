@@ -102,6 +102,7 @@ TEST(Recipe, DefaultsAreValidAndResolvedJsonHasEveryKey)
     EXPECT_TRUE(j["width"].is_null());
     EXPECT_TRUE(j["color"].is_null());
     EXPECT_TRUE(j["input"]["surface"].is_null());
+    EXPECT_EQ(j["input"]["seeds"], ""); // no seeds file: the distribution places the spots
     EXPECT_EQ(j["output"]["upsample"], 2);
     EXPECT_EQ(j["output"]["write_tangent"], false);
     EXPECT_EQ(j["output"]["half"], false);
@@ -132,6 +133,9 @@ TEST(Recipe, FullRecipeRoundTrip)
     r.input.seed = 0xFFFFFFFFFFFFFFFFull;
     r.lic.tolerance = 1e-7;
     const json j = r.toJson();
+    Recipe seeded = Recipe::fromJson(json{{"input", {{"type", "spots"}, {"seeds", "cache/points.npy"}}}});
+    EXPECT_EQ(seeded.input.seeds, "cache/points.npy");
+    EXPECT_EQ(Recipe::fromJson(seeded.toJson()), seeded);
     const Recipe back = Recipe::fromJson(json::parse(j.dump()));
     EXPECT_EQ(back, r);
     EXPECT_EQ(back.toJson(), j);
@@ -333,6 +337,9 @@ TEST(RecipeValidate, EachRuleNamesTheKey)
         {R"({"input": {"radii": [0, 1]}})", "input.radii[0]: must be > 0 (got 0)"},
         {R"({"input": {"halo_scale": 0.5}})", "input.halo_scale: must be >= 1 (got 0.5)"},
         {R"({"input": {"surface": {"threshold": 1}}})", "input.surface.scalar: must be a scalar name"},
+        {R"({"input": {"surface": {"scalar": "speed"}, "seeds": "points.txt"}})",
+            "input.seeds: must be \"\" with input.surface (spots come from the seeds file or the surface, not both) "
+            "(got \"points.txt\")"},
         {R"({"roi": {"scalar": "speed", "range": [1, 0]}})", "roi.range: must be [lo, hi] with finite lo < hi (got [1, 0])"},
         {R"({"roi": {"scalar": "speed", "range": [1, 1]}})", "roi.range: must be [lo, hi] with finite lo < hi"},
         {R"({"roi": {"scalar": "speed", "mode": "during"}})", "roi.mode: must be one of \"pre\", \"post\""},

@@ -66,6 +66,7 @@ void BakeCommand::addOptions(CLI::App& cmd)
         "  licvdb bake --field cache_data/fluid_data_0010.vdb --out smoke_lic.vdb   # Blender smoke cache\n"
         "  licvdb bake --field 'cache_data/fluid_data_####.vdb' --field-frames 1,120 --out smoke.vdb  # unsteady: smoke_0001.vdb …\n"
         "  licvdb bake --field jet.vdb --out oriented.vdb --kernel exp --frames 24   # a loop of tapered streamlets\n"
+        "  licvdb bake --field jet.vdb --out seeded.vdb --input spots --seeds points.txt   # lines through your points (x y z, world units)\n"
         "  licvdb bake --field flow.npy --voxel-size 0.1 --origin -1,-1,0 --out flow_lic.vdb\n"
         "  licvdb bake --field flow.raw --shape 64,64,32 --dtype float64 --out flow_lic.vdb\n"
         "Field formats and preparation: see docs/inputs.md.\n");
@@ -159,6 +160,8 @@ void BakeCommand::addSpotFlags()
 {
     RecipeFlags& f = *mFlags;
     f.option<std::string>("--distribution", "input.distribution", "Spots: regular|random|jittered|poisson [poisson]");
+    f.text("--seeds", "input.seeds",
+           "Spots: centres from FILE, world units (.npy (N,3) float32/64, or text lines x y z); replaces --distribution");
     f.option<double>("--spacing", "input.spacing", "Spots: spacing d between spot centres, output voxels [6]");
     f.option<double>("--jitter", "input.jitter", "Jittered spots: offset up to ±jitter·d/2 per axis, [0,1] [0.25]");
     f.text("--radii", "input.radii", "Spots: line radii R1,R2,... increasing, output voxels (one per width level, at most 4) [1]",
@@ -208,6 +211,13 @@ void BakeCommand::report(const json& summary, const Recipe& recipe, const MpiSes
 {
     if (!mCommon.quiet && summary.contains("field") && summary["field"].contains("notes"))
         for (const auto& note : summary["field"]["notes"]) std::cerr << "licvdb bake: " << note.get<std::string>() << "\n";
+    const json* seeds = summary.contains("spots") && summary["spots"].is_object() && summary["spots"].contains("seeds")
+                            ? &summary["spots"]["seeds"] : nullptr;
+    if (!mCommon.quiet && seeds && (*seeds)["dropped"].get<std::uint64_t>() > 0) {
+        std::cerr << "licvdb bake: " << (*seeds)["dropped"].get<std::uint64_t>() << " of " << (*seeds)["points"].get<std::uint64_t>()
+                  << " seed points of " << recipe.input.seeds
+                  << " lie outside the output domain (the field's active voxels) and were dropped\n";
+    }
     if (mCommon.json) {
         std::cout << summary.dump(2) << "\n";
     } else if (!mCommon.quiet) {

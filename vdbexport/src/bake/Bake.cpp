@@ -187,6 +187,7 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     const nlohmann::json resolved = recipe.toJson();
     pipeline::Description desc = pipeline::describeBake(plan, resolved, fb.share.loaded.gridName, fb.layout().dim(),
                                                         fb.spotCount, fb.ranges, fb.cmap ? &*fb.cmap : nullptr);
+    pipeline::describeSeeds(desc, recipe, fb.input);
     openvdb::MetaMap& densityMeta = desc.densityMeta; // on `density` of every frame
     densityMeta.insertMeta("lic_frames", openvdb::Int32Metadata(plan.frames));
     densityMeta.insertMeta("lic_cyclic", openvdb::BoolMetadata(plan.frames > 1));

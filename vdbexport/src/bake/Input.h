@@ -20,6 +20,10 @@ struct Input
 {
     lic::SpotSet spots;                            ///< spot bakes: centres (output index) and weights
     std::uint64_t spotCount = 0;                   ///< spot bakes: spots of this process's bricks
+    std::uint64_t seedsRead = 0;                   ///< input.seeds: points in the file (0 without seeds)
+    /// input.seeds: points whose nearest output voxel is not an active voxel of the output domain
+    /// (dropped; the whole bake's count on every process)
+    std::uint64_t seedsDropped = 0;
     std::unique_ptr<lic::NoiseBrickSource> noise;  ///< noise bakes: per-brick noise
 };
 
@@ -38,7 +42,8 @@ lic::SpotSet spotsOfShare(const lic::SpotSet& all, const lic::OutputDomain& doma
                           std::uint64_t& owned);
 
 /// `share`: null for the whole bake (one process).
-/// @throw lic::InputError for a surface scalar without ridges above its threshold.
+/// @throw lic::InputError for a surface scalar without ridges above its threshold, or a bad
+///        seeds file (input.seeds, vdbexport/io/SeedPoints.h).
 /// `raw`: the noise bake's per-voxel white noise when it is not the seed's (an unsteady
 /// sequence's carried noise, lic/texture/Advection.h).
 Input makeInput(const Plan& plan, const lic::OutputDomain& domain, lic::ScalarSet& scalars, const SpotShare* share = nullptr,

@@ -38,6 +38,9 @@ void checkSupported(const Recipe& r)
     if (!spots && r.input.surface) {
         throw lic::InputError("input.surface places spots: it needs input.type \"spots\" (--input spots)");
     }
+    if (!spots && !r.input.seeds.empty()) {
+        throw lic::InputError("input.seeds (--seeds) places spots: it needs input.type \"spots\" (--input spots)");
+    }
     if (spots && r.input.radii.size() > 4) {
         throw lic::InputError("input.radii has " + std::to_string(r.input.radii.size()) +
                               " radii; at most 4 width levels are supported");
@@ -105,6 +108,10 @@ Plan makePlan(const Recipe& recipe)
     if (recipe.field.path.find('#') == std::string::npos && !fs::exists(recipe.field.path, ec) &&
         !relativeToCwd(recipe.field.path).empty()) {
         throw lic::InputError("field file \"" + recipe.field.path + "\" not found" + relativeToCwd(recipe.field.path));
+    }
+    if (!recipe.input.seeds.empty() && !fs::exists(recipe.input.seeds, ec)) {
+        throw lic::InputError("input.seeds: seeds file \"" + recipe.input.seeds + "\" not found; expected a .npy (N, 3) "
+                              "or a text file of x y z lines (world units)" + relativeToCwd(recipe.input.seeds));
     }
     checkOutputDirectory(recipe.output.path);
     checkNotOverwritten(recipe, recipe.field.path, "the input field");

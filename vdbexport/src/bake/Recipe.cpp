@@ -136,7 +136,7 @@ template <> struct Schema<InputSpec>
             field("spacing", &InputSpec::spacing), field("jitter", &InputSpec::jitter),
             field("radii", &InputSpec::radii), field("halo_scale", &InputSpec::haloScale),
             field("seed", &InputSpec::seed), field("noise_filter", &InputSpec::noiseFilter),
-            field("surface", &InputSpec::surface));
+            field("surface", &InputSpec::surface), field("seeds", &InputSpec::seeds));
     }
 };
 template <> struct Schema<RoiSpec>
@@ -542,6 +542,9 @@ void Recipe::validate() const
     if (input.surface) {
         checkScalar("input.surface.scalar", input.surface->scalar);
         if (!std::isfinite(input.surface->threshold)) violation("input.surface.threshold", "finite", fmt(input.surface->threshold));
+        if (!input.seeds.empty())
+            violation("input.seeds", "\"\" with input.surface (spots come from the seeds file or the surface, not both)",
+                      quote(input.seeds));
     }
 
     if (roi) {

@@ -99,6 +99,11 @@ FieldFrames checkSequence(const Recipe& recipe)
         throw lic::InputError("input.surface: spots on a ridge surface are not carried through an unsteady sequence "
                               "(the surface moves with the flow); use spots that fill the volume, or bake frames one by one");
     }
+    if (!recipe.input.seeds.empty()) {
+        throw lic::InputError("input.seeds (--seeds) is not available with an unsteady field sequence yet: new spots "
+                              "enter a sequence by input.distribution, not from the seeds file; use a distribution, "
+                              "or bake the frames one by one with --seeds");
+    }
     FieldFrames frames = resolveFieldFrames(recipe.field);
     // No output frame may be one of the input frames under any name (as fs::equivalent: the same
     // device and inode; each frame's plan checks only its own pair).

@@ -1,5 +1,7 @@
 #include "Write.h"
 
+#include "vdbexport/io/Sha256.h"
+
 #include "vdbexport/io/OutputNames.h"
 #include "vdbexport/io/VdbIO.h"
 
@@ -47,7 +49,9 @@ Description describeBake(const Plan& plan, const nlohmann::json& resolved, const
     }
     d.densityMeta.insertMeta("lic_input", openvdb::StringMetadata(recipe.input.type));
     if (plan.spots) {
-        const std::string placement = recipe.input.surface ? "surface" : recipe.input.distribution;
+        const std::string placement = recipe.input.surface      ? "surface"
+                                      : !recipe.input.seeds.empty() ? "seeds"
+                                                                    : recipe.input.distribution;
         d.densityMeta.insertMeta("lic_spot_count", openvdb::Int64Metadata(openvdb::Int64(spotCount)));
         d.densityMeta.insertMeta("lic_spot_placement", openvdb::StringMetadata(placement));
         d.densityMeta.insertMeta("lic_halo_scale", openvdb::FloatMetadata(float(recipe.input.haloScale)));
@@ -72,6 +76,17 @@ Description describeBake(const Plan& plan, const nlohmann::json& resolved, const
                    {"space", "sRGB"}, {"points", points}};
     }
     return d;
+}
+
+void describeSeeds(Description& d, const Recipe& recipe, const Input& input)
+{
+    if (recipe.input.seeds.empty()) return;
+    const std::string sha = sha256OfFile(recipe.input.seeds);
+    d.densityMeta.insertMeta("lic_seeds_sha256", openvdb::StringMetadata(sha));
+    d.densityMeta.insertMeta("lic_seeds_dropped", openvdb::Int64Metadata(openvdb::Int64(input.seedsDropped)));
+    if (d.spots.is_object())
+        d.spots["seeds"] = {{"path", recipe.input.seeds}, {"sha256", sha}, {"points", input.seedsRead},
+                            {"dropped", input.seedsDropped}};
 }
 
 namespace {

@@ -45,6 +45,11 @@ struct Description
 Description describeBake(const Plan& plan, const nlohmann::json& resolved, const std::string& fieldGrid, int brickDim,
                          std::uint64_t spotCount, const Ranges& ranges, const lic::Colormap* cmap);
 
+/// With input.seeds: the seeds file's path, SHA-256, point count and how many were dropped (off the
+/// output domain), as `density` metadata (`lic_seeds_sha256`, `lic_seeds_dropped`) and the
+/// manifest's `spots.seeds`.
+void describeSeeds(Description& d, const Recipe& recipe, const Input& input);
+
 /// Stage one frame's grids for `path`: `densityMeta` and `lic_frame` = frameNumber on `density`,
 /// half floats if the recipe asks. `sealed`: the records of grids whose leaves were sealed.
 void stageFrame(const Recipe& recipe, openvdb::GridPtrVec& grids, const openvdb::MetaMap& densityMeta, int frameNumber,

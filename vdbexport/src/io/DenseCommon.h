@@ -12,6 +12,7 @@
 #include <cstring>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace vdbexport::detail {
 
@@ -78,5 +79,20 @@ inline void checkDims(const std::array<std::int64_t, 3>& d, const std::string& s
                                + std::to_string(d[2]) + " are too large (limit " + std::to_string(kMaxDenseVoxels)
                                + " voxels); refusing to allocate");
 }
+
+/// A parsed .npy header and where its data starts (inside the bytes given to parseNpyArray).
+struct NpyArray
+{
+    std::vector<std::int64_t> shape;
+    Elem elem = Elem::F32;
+    std::string descr;                ///< the header's dtype text ('<f4', ...)
+    bool bigEndian = false, fortran = false;
+    const unsigned char* data = nullptr;
+    std::size_t available = 0;        ///< bytes after the header
+};
+
+/// Parse a .npy file's header (versions 1.0, 2.0, 3.0).
+/// @throw lic::InputError naming `source` for a bad magic, version, header, dtype or shape.
+NpyArray parseNpyArray(std::string_view bytes, const std::string& source);
 
 } // namespace vdbexport::detail

@@ -160,7 +160,7 @@ DenseImage fromArray(const unsigned char* data, std::size_t available, Elem elem
 
 } // namespace
 
-DenseImage parseNpy(std::string_view bytes, const std::string& source)
+NpyArray detail::parseNpyArray(std::string_view bytes, const std::string& source)
 {
     static const char magic[] = "\x93NUMPY";
     if (bytes.size() < 10 || bytes.compare(0, 6, std::string_view(magic, 6)) != 0)
@@ -188,18 +188,25 @@ DenseImage parseNpy(std::string_view bytes, const std::string& source)
     const std::string descr = dictValue(dict, "descr", source);
     const std::string fortranText = dictValue(dict, "fortran_order", source);
     const std::string shapeText = dictValue(dict, "shape", source);
-    bool fortran = false;
-    if (fortranText == "True") fortran = true;
+    NpyArray a;
+    if (fortranText == "True") a.fortran = true;
     else if (fortranText != "False")
         inputError(source, "malformed .npy header: fortran_order is '" + fortranText.substr(0, 20) + "'; expected True or False");
     if (shapeText.empty() || shapeText[0] != '(')
         inputError(source, "malformed .npy header: shape is '" + shapeText.substr(0, 40) + "'; expected a tuple");
-    Elem elem;
-    bool big;
-    parseDtype(descr, source, elem, big);
-    const auto shape = parseShape(shapeText, source);
+    parseDtype(descr, source, a.elem, a.bigEndian);
+    a.descr = descr;
+    a.shape = parseShape(shapeText, source);
     const std::size_t dataStart = headerStart + headerLen;
-    return fromArray(u + dataStart, bytes.size() - dataStart, elem, big, fortran, shape, source);
+    a.data = u + dataStart;
+    a.available = bytes.size() - dataStart;
+    return a;
+}
+
+DenseImage parseNpy(std::string_view bytes, const std::string& source)
+{
+    const NpyArray a = parseNpyArray(bytes, source);
+    return fromArray(a.data, a.available, a.elem, a.bigEndian, a.fortran, a.shape, source);
 }
 
 DenseImage parseRaw(std::string_view bytes, const std::array<std::int64_t, 3>& shape, const std::string& dtype,

@@ -10,6 +10,7 @@
 #include <openvdb/Exceptions.h>
 #include <openvdb/io/GridDescriptor.h>
 #include <openvdb/tools/Interpolation.h>
+#include <openvdb/tools/ValueTransformer.h>
 #include <openvdb/tree/LeafManager.h>
 
 #include <log4cplus/logger.h>
@@ -30,6 +31,7 @@
 #include <mutex>
 #include <new>
 #include <set>
+#include <sstream>
 #include <system_error>
 #include <thread>
 #include <tuple>
@@ -511,19 +513,101 @@ std::string findSplitBase(const std::vector<std::pair<std::string, std::string>>
     return "";
 }
 
-/// One Vec3 grid from three scalar component grids (Houdini's split `vel.x`, `vel.y`, `vel.z`).
-/// The result has the x grid's transform and the union of the three active regions; each
-/// component is sampled trilinearly at the result's voxel centres in world space, so component
-/// grids offset by half a voxel (face-centred, MAC style) are handled too.
+/// For a base name with some but not all of its split components (`vel.x`, `vel.y` without
+/// `vel.z`): " (split components 'vel.x', 'vel.y' found, 'vel.z' missing)"; "" otherwise.
+/// `only` = "" looks at the default names (velocity, vel, v) and every `*.x`/`*_x` grid.
+std::string partialSplitNote(const std::vector<std::pair<std::string, std::string>>& grids, const std::string& only)
+{
+    const auto has = [&](const std::string& n) {
+        return std::any_of(grids.begin(), grids.end(), [&](const auto& g) { return g.first == n && isScalarType(g.second); });
+    };
+    std::vector<std::string> bases;
+    if (!only.empty()) bases.push_back(only);
+    else {
+        for (const char* n : kDefaultVelocityNames) bases.emplace_back(n);
+        for (const auto& g : grids)
+            if (g.first.size() > 2 && (g.first[g.first.size() - 2] == '.' || g.first[g.first.size() - 2] == '_'))
+                bases.push_back(g.first.substr(0, g.first.size() - 2));
+    }
+    for (const auto& b : bases)
+        for (const char* sp : {".", "_"}) {
+            std::string found, missing;
+            for (const char a : {'x', 'y', 'z'}) {
+                const std::string n = b + sp + a;
+                std::string& list = has(n) ? found : missing;
+                list += (list.empty() ? "" : ", ") + q(n);
+            }
+            if (!found.empty() && !missing.empty())
+                return " (split components " + found + " found, " + missing + " missing)";
+        }
+    return "";
+}
+
+/// Split components must share a voxel size and orientation (their linear maps equal up to the
+/// translation): a face-centred (MAC) layout, offset by half a voxel, is sampled in world space;
+/// components of different resolutions or rotations are refused rather than resampled.
+/// @throw lic::InputError naming each component's voxel size.
+void checkSplitTransforms(const openvdb::FloatGrid::Ptr (&comp)[3], const std::string (&names)[3], const std::string& path)
+{
+    const auto linear = [](const openvdb::FloatGrid& g) {
+        openvdb::Mat4d m = g.transform().baseMap()->getAffineMap()->getMat4();
+        m.setTranslation(openvdb::Vec3d(0.0));
+        return m;
+    };
+    const openvdb::Mat4d m0 = linear(*comp[0]);
+    if (linear(*comp[1]).eq(m0, 1e-12) && linear(*comp[2]).eq(m0, 1e-12)) return;
+    std::ostringstream msg;
+    msg << "split velocity components in " << q(path) << " have different transforms (";
+    for (int a = 0; a < 3; ++a) msg << (a ? ", " : "") << q(names[a]) << " voxel size " << comp[a]->voxelSize();
+    msg << "); the three grids must share one voxel size and orientation (offsets by part of a voxel, "
+           "as in a face-centred layout, are allowed)";
+    throw lic::InputError(msg.str());
+}
+
+/// The value of every active voxel of `out`: component a read from comp[a] at the same index
+/// coordinate (`same` transforms), else sampled trilinearly at the voxel's world position.
+/// Threaded (tools::foreach, a copy of the accessors per task); each value depends only on its voxel.
+void fillFromComponents(openvdb::Vec3SGrid& out, const openvdb::FloatGrid::Ptr (&comp)[3], bool same)
+{
+    using Sampler = openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler>;
+    struct Fill
+    {
+        openvdb::FloatGrid::ConstAccessor acc[3];
+        const openvdb::FloatGrid::Ptr (&grids)[3];
+        const openvdb::math::Transform& xform;
+        bool same;
+        void operator()(const openvdb::Vec3SGrid::ValueOnIter& it) const
+        {
+            openvdb::Vec3s v;
+            const openvdb::Vec3d w = same ? openvdb::Vec3d(0.0) : xform.indexToWorld(it.getCoord());
+            for (int a = 0; a < 3; ++a)
+                v[a] = same ? acc[a].getValue(it.getCoord()) : Sampler(acc[a], grids[a]->transform()).wsSample(w);
+            it.setValue(v);
+        }
+    };
+    // Not const: a const op would be shared by the threads, and accessors cache per thread.
+    Fill fill{{comp[0]->getConstAccessor(), comp[1]->getConstAccessor(), comp[2]->getConstAccessor()},
+              comp, out.transform(), same};
+    openvdb::tools::foreach(out.beginValueOn(), fill, /*threaded=*/true, /*shared=*/false);
+}
+
+/// One Vec3 grid from three scalar component grids (Houdini's and EmberGen's split `vel.x`,
+/// `vel.y`, `vel.z`). The result has the x grid's transform and the union of the three active
+/// regions (tools: topologyUnion); components offset by part of a voxel (face-centred, MAC style)
+/// are sampled trilinearly at the result's voxel centres in world space.
+/// @throw lic::InputError for a component that is not a scalar grid, a non-linear transform, or
+///        components of different voxel sizes or orientations (checkSplitTransforms).
 openvdb::Vec3SGrid::Ptr combineSplit(detail::VdbReader& reader, const std::string& base, const std::string& sep)
 {
     openvdb::FloatGrid::Ptr comp[3];
+    const std::string names[3] = {base + sep + "x", base + sep + "y", base + sep + "z"};
     for (int a = 0; a < 3; ++a) {
-        comp[a] = toFloat(reader.readGrid(base + sep + "xyz"[a]));
-        if (!comp[a]) throw lic::InputError("grid " + q(base + sep + "xyz"[a]) + " in " + q(reader.path()) + " is not a scalar grid");
+        comp[a] = toFloat(reader.readGrid(names[a]));
+        if (!comp[a]) throw lic::InputError("grid " + q(names[a]) + " in " + q(reader.path()) + " is not a scalar grid");
         if (!comp[a]->transform().isLinear())
-            throw lic::InputError("grid " + q(base + sep + "xyz"[a]) + " in " + q(reader.path()) + " has a non-linear transform");
+            throw lic::InputError("grid " + q(names[a]) + " in " + q(reader.path()) + " has a non-linear transform");
     }
+    checkSplitTransforms(comp, names, reader.path());
     auto out = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
     out->setTransform(comp[0]->transform().copy());
     out->setName(base);
@@ -532,27 +616,18 @@ openvdb::Vec3SGrid::Ptr combineSplit(detail::VdbReader& reader, const std::strin
     for (int a = 0; a < 3; ++a) {
         if (sameXform) {
             out->tree().topologyUnion(comp[a]->tree());
-        } else {
-            const openvdb::CoordBBox bb = comp[a]->evalActiveVoxelBoundingBox();
-            if (bb.empty()) continue;
-            const openvdb::BBoxd w = comp[a]->transform().indexToWorld(bb);
-            const openvdb::Vec3d lo = out->worldToIndex(w.min()), hi = out->worldToIndex(w.max());
-            out->tree().sparseFill(openvdb::CoordBBox(openvdb::Coord::round(openvdb::math::minComponent(lo, hi)),
-                                                      openvdb::Coord::round(openvdb::math::maxComponent(lo, hi))),
-                                   openvdb::Vec3s(0.0f), true);
+            continue;
         }
+        const openvdb::CoordBBox bb = comp[a]->evalActiveVoxelBoundingBox();
+        if (bb.empty()) continue;
+        const openvdb::BBoxd w = comp[a]->transform().indexToWorld(bb);
+        const openvdb::Vec3d lo = out->worldToIndex(w.min()), hi = out->worldToIndex(w.max());
+        out->tree().sparseFill(openvdb::CoordBBox(openvdb::Coord::round(openvdb::math::minComponent(lo, hi)),
+                                                  openvdb::Coord::round(openvdb::math::maxComponent(lo, hi))),
+                               openvdb::Vec3s(0.0f), true);
     }
     out->tree().voxelizeActiveTiles();
-    using Sampler = openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler>;
-    openvdb::FloatGrid::ConstAccessor acc[3] = {comp[0]->getConstAccessor(), comp[1]->getConstAccessor(), comp[2]->getConstAccessor()};
-    for (auto it = out->tree().beginValueOn(); it; ++it) {
-        openvdb::Vec3s v;
-        for (int a = 0; a < 3; ++a) {
-            if (sameXform) v[a] = acc[a].getValue(it.getCoord());
-            else v[a] = Sampler(acc[a], comp[a]->transform()).wsSample(out->indexToWorld(it.getCoord()));
-        }
-        it.setValue(v);
-    }
+    fillFromComponents(*out, comp, sameXform);
     return out;
 }
 
@@ -576,7 +651,7 @@ openvdb::Vec3SGrid::Ptr readVelocityGrid(const std::string& path, const std::str
                 if (chosenName) *chosenName = name;
                 return combineSplit(reader, name, sep);
             }
-            throw lic::InputError("grid " + q(name) + " not found in " + q(path)
+            throw lic::InputError("grid " + q(name) + " not found in " + q(path) + partialSplitNote(grids, name)
                                   + "; the file has: " + detail::listGrids(grids));
         }
         if (!detail::isVec3Type(it->second))
@@ -603,9 +678,9 @@ openvdb::Vec3SGrid::Ptr readVelocityGrid(const std::string& path, const std::str
                 return combineSplit(reader, split, sep);
             }
             if (vec3.empty())
-                throw lic::InputError(q(path) + " has no Vec3 grid to use as a velocity field; "
-                                      "the file has: " + detail::listGrids(grids)
-                                      + "; expected a vec3s, vec3d or vec3i grid");
+                throw lic::InputError(q(path) + " has no Vec3 grid to use as a velocity field" + partialSplitNote(grids, "")
+                                      + "; the file has: " + detail::listGrids(grids)
+                                      + "; expected a vec3s, vec3d or vec3i grid, or float grids NAME.x, NAME.y, NAME.z");
             if (vec3.size() > 1)
                 throw lic::InputError(q(path) + " has several Vec3 grids and none is named "
                                       "'velocity', 'vel' or 'v': " + detail::listGrids(vec3)

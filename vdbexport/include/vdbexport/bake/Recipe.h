@@ -100,6 +100,10 @@ struct InputSpec
     std::uint64_t seed = 1;               ///< `seed`: hash seed for noise and spot positions
     std::string noiseFilter = "binomial"; ///< `noise_filter`: "binomial" (3³ low-pass) | "none"
     std::optional<SurfaceSpec> surface;   ///< `surface`: null = spots fill the volume
+    /// `seeds`: a file of spot centres in world units (.npy (N, 3) float32/float64, or text
+    /// `x y z` lines); "" = none. Replaces `distribution` (then `distribution`, `spacing` and
+    /// `jitter` are ignored); not with `surface`
+    std::string seeds;
 
     bool operator==(const InputSpec&) const = default;
 };
