@@ -1,5 +1,5 @@
-"""licvdb: import LIC bakes (.vdb) with their look, play loops, bake LIC from smoke simulations and
-from flow field files.
+"""licvdb: import LIC bakes (.vdb) with their look, play loops, bake LIC from smoke simulations,
+flow field files and Volume objects, and re-bake a result in place.
 
 Blender 3.4+ as a legacy add-on (``bl_info``), 4.2+ as an extension (``blender_manifest.toml``).
 This file only registers; the work is in the modules beside it.
@@ -10,18 +10,19 @@ bl_info = {
     "author": "licvdb authors",
     "version": (0, 1, 0),
     "blender": (3, 4, 0),
-    "location": "File > Import > licvdb bake (.vdb), Bake LIC from flow file; View3D > Sidebar > licvdb",
+    "location": "File > Import > licvdb bake (.vdb), Bake LIC from flow file; View3D > Sidebar > licvdb; "
+                "Properties > Object Data (volume)",
     "description": "Import 3D line integral convolution bakes, build their look, bake LIC from smoke and flow files",
     "category": "Import-Export",
 }
 
 import bpy
 
-from . import (engine, manifest, material, ops_bake, ops_bake_file, ops_import, panel, prefs,  # noqa: F401
-               props)  # (public modules)
+from . import (engine, manifest, material, ops_bake, ops_bake_file, ops_bake_volume, ops_import,  # noqa: F401
+               ops_rebake, panel, prefs, props)  # (public modules)
 
 _classes = (*prefs.classes, *props.classes, *ops_import.classes, *ops_bake.classes, *ops_bake_file.classes,
-            *panel.classes)
+            *ops_bake_volume.classes, *ops_rebake.classes, *panel.classes)
 
 
 def register():

@@ -116,6 +116,24 @@ def new_bake_base(out_dir: str, stem: str) -> str:
     return os.path.join(out_dir, f"{bpy.path.clean_name(stem)}_lic_{run}")
 
 
+def settings_dict(settings) -> dict:
+    """The scene's bake settings (``scene.licvdb_bake``) as a plain dict, for a result to remember."""
+    return {p.identifier: getattr(settings, p.identifier) for p in settings.bl_rna.properties
+            if p.identifier not in ("rna_type", "name")}
+
+
+def record_source(obj, kind: str, used: dict, source_object=None, source_path: str = "", grid: str = ""):
+    """Remember on a bake result what it was baked from (``obj.licvdb.source_*``) and the settings
+    it used (``used``: settings_dict when the bake was planned), so licvdb.rebake can bake it
+    again. ``kind``: FLUID, FILE or VOLUME."""
+    s = obj.licvdb
+    s.source_kind = kind
+    s.source_object = source_object
+    s.source_path = source_path
+    s.source_grid = grid
+    s.bake_settings = json.dumps(used, sort_keys=True)
+
+
 class BakeJob:
     """Runs ``licvdb bake --recipe …`` for a list of tasks, one subprocess at a time.
 
@@ -327,6 +345,7 @@ def plan_bake(context, obj):
     job = BakeJob(exe, tasks)
     domain_name = obj.name
     loop_frames = settings.loop_frames
+    used = settings_dict(settings)
 
     def finish(ctx):
         dom = ctx.scene.objects.get(domain_name)
@@ -346,6 +365,7 @@ def plan_bake(context, obj):
             new.licvdb.voxel_size = new.licvdb.voxel_size * new.matrix_world.to_scale()[0]
             props.apply_look(new)
         new["licvdb_field"] = summary.get("field", {}).get("path", "")
+        record_source(new, "FLUID", used, source_object=dom)
         return new
 
     return job, finish
@@ -364,6 +384,8 @@ class BakeRunner:
     _timer = None
     _job = None
     _finish = None
+    #: What the report says was done with the result ("licvdb: baked and imported OBJ in 3.1 s").
+    done_verb = "baked and imported"
 
     def plan(self, context):
         raise NotImplementedError
@@ -390,7 +412,7 @@ class BakeRunner:
             traceback.print_exc()
             self.report({"ERROR"}, f"baked, but the import failed: {e}")
             return {"CANCELLED"}
-        self.report({"INFO"}, f"licvdb: baked and imported {obj.name} in {time.monotonic() - job.started:.1f} s")
+        self.report({"INFO"}, f"licvdb: {self.done_verb} {obj.name} in {time.monotonic() - job.started:.1f} s")
         return {"FINISHED"}
 
     def run_blocking(self, context):

@@ -13,7 +13,8 @@ import bpy
 from bpy_extras.io_utils import ImportHelper
 
 from . import ops_import, prefs
-from .ops_bake import BakeError, BakeJob, BakeRunner, make_recipe, new_bake_base, output_dir
+from .ops_bake import (BakeError, BakeJob, BakeRunner, make_recipe, new_bake_base, output_dir, record_source,
+                       settings_dict)
 
 
 def plan_file_bake(context, field_path: str, grid: str = ""):
@@ -34,10 +35,12 @@ def plan_file_bake(context, field_path: str, grid: str = ""):
     recipe = make_recipe(settings, field_path, f"{base}.vdb", loops, grid=grid)
     job = BakeJob(exe, [(os.path.basename(field_path), recipe)])
     first = f"{base}_0001.vdb" if loops > 1 else f"{base}.vdb"  # a loop: OUT_0001.vdb … and one manifest
+    used = settings_dict(settings)
 
     def finish(ctx):
         new = ops_import.import_bake(ctx, first, setup_render=True)
         new["licvdb_field"] = field_path
+        record_source(new, "FILE", used, source_path=field_path, grid=grid)
         return new
 
     return job, finish

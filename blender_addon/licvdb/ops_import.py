@@ -101,6 +101,7 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
         vs = man.grids[0].voxel_size if man and man.grids else (s.voxel_size,) * 3
         obj.matrix_world = Matrix.Translation(-0.5 * Vector(vs))
         s.half_voxel_shift = True
+        s.placement_shift = -0.5 * Vector(vs)
     with props.rebuild_suspended():  # one rebuild below, not one per property
         s.look = "HALOS" if "halo" in loaded else "LINES"
         if man and (man.recipe.get("input") or {}).get("type") == "noise":

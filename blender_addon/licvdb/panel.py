@@ -1,5 +1,6 @@
-"""The N-panel (3D view sidebar, tab "licvdb"): the look of the active bake, and baking from a
-fluid domain (or from a flow file, with the same settings)."""
+"""The N-panel (3D view sidebar, tab "licvdb"): the look of the active bake (and its Re-bake), and
+baking from a fluid domain, a flow file or a Volume object with the same settings; the last also
+in Properties > Object Data of a volume."""
 
 import bpy
 
@@ -42,6 +43,10 @@ class LICVDB_PT_look(bpy.types.Panel):
         if s.frames > 1:
             box.label(text=f"{s.frames} frames" + (", seamless loop" if s.cyclic else ""))
         box.label(text=f"Voxel: {s.voxel_size:.4g}")
+        if s.source_kind != "NONE":
+            src = s.source_path if s.source_kind == "FILE" else (s.source_object.name if s.source_object else "(gone)")
+            box.label(text=f"Baked from: {src}")
+            layout.operator("licvdb.rebake", icon="FILE_REFRESH")
         if compat.volume_step_rate_ignored(context.scene):
             col = layout.column(align=True)
             col.label(text="Cycles ignores the volume step rate:", icon="ERROR")
@@ -87,6 +92,68 @@ class LICVDB_PT_bake(bpy.types.Panel):
         layout.prop(s, "threads")
         layout.operator("licvdb.bake_fluid", icon="RENDER_STILL")
         layout.operator("licvdb.bake_file", text="Bake LIC from flow file…", icon="FILEBROWSER")
+        if _is_source_volume(context):
+            layout.operator("licvdb.bake_volume", icon="VOLUME_DATA")
 
 
-classes = (LICVDB_PT_look, LICVDB_PT_bake)
+def draw_bake_volume(layout, context):
+    """The bake-from-volume controls for the active Volume object (both panels below)."""
+    obj = context.active_object
+    vol = obj.data
+    grids = vol.grids if vol.grids.is_loaded else None
+    if grids is not None and len(grids):
+        layout.prop_search(obj.licvdb, "velocity_grid", vol, "grids", text="Velocity grid")
+    else:
+        layout.prop(obj.licvdb, "velocity_grid")
+    if not obj.licvdb.velocity_grid:
+        layout.label(text="Automatic: velocity, vel, v or vel.x/y/z", icon="INFO")
+    if vol.is_sequence:
+        layout.label(text=f"Sequence: {vol.frame_duration} frames, one unsteady bake")
+    if vol.packed_file is not None:
+        layout.label(text="Packed file: unpack it to bake", icon="ERROR")
+    if prefs.find_executable(context) is None:
+        layout.label(text="licvdb executable not found", icon="ERROR")
+    layout.label(text="Settings: Sidebar > licvdb > Bake LIC from fluid")
+    layout.operator("licvdb.bake_volume", icon="RENDER_STILL")
+
+
+def _is_source_volume(context) -> bool:
+    obj = context.active_object
+    return obj is not None and obj.type == "VOLUME" and not obj.licvdb.is_bake
+
+
+class LICVDB_PT_bake_volume(bpy.types.Panel):
+    """3D view sidebar: bake LIC from the active Volume object."""
+
+    bl_label = "Bake LIC from volume"
+    bl_idname = "LICVDB_PT_bake_volume"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "licvdb"
+
+    @classmethod
+    def poll(cls, context):
+        return _is_source_volume(context)
+
+    def draw(self, context):
+        draw_bake_volume(self.layout, context)
+
+
+class LICVDB_PT_volume_data(bpy.types.Panel):
+    """Properties > Object Data of a volume: bake LIC from it."""
+
+    bl_label = "licvdb: Bake LIC"
+    bl_idname = "LICVDB_PT_volume_data"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "data"
+
+    @classmethod
+    def poll(cls, context):
+        return _is_source_volume(context)
+
+    def draw(self, context):
+        draw_bake_volume(self.layout, context)
+
+
+classes = (LICVDB_PT_look, LICVDB_PT_bake, LICVDB_PT_bake_volume, LICVDB_PT_volume_data)

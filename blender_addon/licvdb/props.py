@@ -79,6 +79,12 @@ COLOR_SOURCES = [("AUTO", "Auto", "Scalar + colour ramp if the bake has a colorm
                  ("WHITE", "White", "Uncoloured lines")]
 
 
+SOURCE_KINDS = [("NONE", "Nothing", "Imported, not baked by the add-on"),
+                ("FLUID", "Fluid domain", "licvdb.bake_fluid: a smoke domain's OpenVDB cache"),
+                ("FILE", "Flow file", "licvdb.bake_file: a velocity field file"),
+                ("VOLUME", "Volume object", "licvdb.bake_volume: a Volume object's velocity grid")]
+
+
 class LICVDB_ObjectSettings(bpy.types.PropertyGroup):
     is_bake: bpy.props.BoolProperty(name="licvdb bake", default=False)
     manifest: bpy.props.StringProperty(name="Manifest", subtype="FILE_PATH")
@@ -92,6 +98,27 @@ class LICVDB_ObjectSettings(bpy.types.PropertyGroup):
     cyclic: bpy.props.BoolProperty(name="Cyclic", default=False)
     half_voxel_shift: bpy.props.BoolProperty(name="Half-voxel shift", default=False,
                                              description="Moved by −½ voxel to correct Cycles' dense-texture offset")
+    placement_shift: bpy.props.FloatVectorProperty(
+        name="Placement shift", size=3, default=(0.0, 0.0, 0.0),
+        description="The translation the import put last in the object's matrix (−½ output voxel where Cycles "
+                    "needs it, else zero), in the object's local units; a re-bake swaps it for the new one's")
+
+    # What a bake was made from (ops_rebake.py re-runs it): the kind of bake, its source, the
+    # velocity grid asked for, and the scene's bake settings it used (JSON).
+    source_kind: bpy.props.EnumProperty(name="Baked from", items=SOURCE_KINDS, default="NONE")
+    source_object: bpy.props.PointerProperty(name="Source", type=bpy.types.Object,
+                                             description="The fluid domain or Volume object the bake was made from")
+    source_path: bpy.props.StringProperty(name="Source file", subtype="FILE_PATH",
+                                          description="The flow file the bake was made from")
+    source_grid: bpy.props.StringProperty(name="Source grid", description="The velocity grid the bake followed")
+    bake_settings: bpy.props.StringProperty(name="Bake settings",
+                                            description="The scene's bake settings the bake used (JSON)")
+
+    # On a Volume object to bake from (licvdb.bake_volume): its velocity grid.
+    velocity_grid: bpy.props.StringProperty(
+        name="Velocity grid", default="",
+        description="The volume's vector grid to bake LIC from; empty = automatic (velocity, vel, v, the only "
+                    "vector grid, or Houdini's split vel.x/vel.y/vel.z)")
 
     look: bpy.props.EnumProperty(name="Look", items=LOOKS, default="LINES", update=_update)
     brightness: bpy.props.FloatProperty(name="Line brightness", default=1.0, min=0.0, soft_max=20.0,

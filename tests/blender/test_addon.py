@@ -84,6 +84,11 @@ class RecordingLayout:
         assert name in data.bl_rna.properties, f"panel shows missing property {name!r}"
         self.log.append(("prop", name))
 
+    def prop_search(self, data, name, search_data, search_name, **kw):
+        assert name in data.bl_rna.properties, f"panel shows missing property {name!r}"
+        assert search_name in search_data.bl_rna.properties, search_name
+        self.log.append(("prop", name))
+
     def operator(self, idname, **kw):
         module, op = idname.split(".")
         assert hasattr(getattr(bpy.ops, module), op), idname

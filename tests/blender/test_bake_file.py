@@ -3,7 +3,6 @@ scene's bake settings, then the import; its errors; cancelling leaves nothing.""
 
 import glob
 import os
-import time
 
 import bpy
 import pytest
@@ -12,19 +11,14 @@ from licvdb import manifest as mf
 from licvdb import ops_bake, ops_bake_file
 
 from conftest import run_licvdb
+from bake_util import small_field, wait_until_running
 from test_executable import clean_env  # noqa: F401 (a fixture)
 
 
 @pytest.fixture
 def field(tmp_path):
     """A 16³ ABC field in a folder of its own, and small bake settings."""
-    d = tmp_path / "flow"
-    d.mkdir()
-    path = d / "F.vdb"
-    run_licvdb("field", "abc", "--res", "16,16,16", "--out", path, "--quiet")
-    s = bpy.context.scene.licvdb_bake
-    s.length, s.upsample = 6.0, 1
-    return path
+    return small_field(tmp_path)
 
 
 def bake(path, **kw):
@@ -99,11 +93,7 @@ def test_cancelled_file_bake_leaves_no_files(tmp_path):
     job, _ = ops_bake_file.plan_file_bake(bpy.context, str(d / "big.vdb"))
     job.tasks[0][1]["lic"]["engine"] = "naive"  # slow enough to be cancelled while it runs
     job.start()
-    t0 = time.monotonic()
-    while not [f for _, f in job.progress_seen if f > 0.0] and time.monotonic() - t0 < 20.0:
-        assert not job.poll(), "the bake finished before it could be cancelled; make it bigger"
-        job.fraction
-        time.sleep(0.05)
+    wait_until_running(job)
     assert "big.vdb (1/1" in job.status()
     job.cancel(grace=120.0)
     assert job.proc.returncode == 1, "licvdb did not stop on SIGINT"

@@ -10,6 +10,7 @@ import pytest
 from mathutils import Matrix, Vector
 
 from conftest import licvdb_exe, run_licvdb
+from bake_util import make_active, wait_until_running
 import controls
 from controls import vdb_module
 from licvdb import ops_bake, ops_import
@@ -50,11 +51,7 @@ def make_smoke(cache_dir):
         scene.frame_set(f)
     for f in range(1, FRAMES + 1):
         assert os.path.isfile(ops_bake.cache_data_file(ds, f)), f"simulation did not write frame {f}"
-    for o in bpy.context.view_layer.objects:
-        o.select_set(False)
-    dom.select_set(True)
-    bpy.context.view_layer.objects.active = dom
-    return dom
+    return make_active(dom)
 
 
 @pytest.fixture
@@ -143,6 +140,34 @@ def test_bake_fluid_current_frame(smoke, tmp_path):
     nodes = obj.active_material.node_tree.nodes
     assert "colormap" in nodes
     print(f"bake_fluid: one frame of a {RES}³ smoke domain baked and imported in {seconds:.2f} s")
+
+
+@pytest.mark.reads_blender_vdb  # licvdb reads this Blender's smoke cache
+def test_rebake_fluid_in_place(smoke):
+    """licvdb.rebake of a fluid bake (test_rebake.py has the file and volume kinds): the same
+    object and material (its node edit kept), still placed on the domain, with the new upsample's
+    half-voxel correction and new files."""
+    bpy.context.scene.frame_set(2)
+    assert bpy.ops.licvdb.bake_fluid() == {"FINISHED"}
+    obj = bpy.context.active_object
+    assert obj.licvdb.source_kind == "FLUID" and obj.licvdb.source_object is smoke
+    mat = obj.active_material
+    mat.node_tree.nodes["black absorption"].inputs["Color"].default_value = (0.1, 0.2, 0.3, 1.0)
+    old = bpy.path.abspath(obj.data.filepath)
+    bpy.context.scene.licvdb_bake.upsample = 1
+    assert bpy.ops.licvdb.rebake() == {"FINISHED"}
+    assert bpy.context.active_object == obj and obj.active_material == mat
+    assert mat.node_tree.nodes["black absorption"].inputs["Color"].default_value[2] == pytest.approx(0.3)
+    new = bpy.path.abspath(obj.data.filepath)
+    assert new != old and os.path.isfile(new) and os.path.isfile(old) and new.endswith("_f0002.vdb")
+    out_voxel = 2.0 / RES
+    shift = -0.5 * out_voxel if obj.licvdb.half_voxel_shift else 0.0
+    assert tuple(obj.licvdb.placement_shift) == pytest.approx((shift,) * 3)
+    expected = ops_bake.domain_placement(smoke, ops_bake.fluid_domain(smoke), 2.0 / RES) @ \
+        Matrix.Translation((shift,) * 3)
+    for a in range(4):
+        for b in range(4):
+            assert obj.matrix_world[a][b] == pytest.approx(expected[a][b], abs=1e-5)
 
 
 @pytest.mark.reads_blender_vdb  # licvdb reads this Blender's smoke cache
@@ -255,11 +280,7 @@ def test_bake_job_cancel_leaves_no_files(tmp_path):
     job = ops_bake.BakeJob(licvdb_exe(), [("frame 1", recipe), ("frame 2", dict(recipe))])
     job.start()
     # Progress arrives as licvdb works (--progress lines), before the bake is done.
-    t0 = time.monotonic()
-    while not [f for _, f in job.progress_seen if f > 0.0] and time.monotonic() - t0 < 20.0:
-        assert not job.poll(), "the bake finished before it could be cancelled; make it bigger"
-        job.fraction
-        time.sleep(0.05)
+    wait_until_running(job)
     assert 0.0 < job.fraction < 0.5, (job.fraction, job.progress_seen)
     assert "frame 1 (1/2, " in job.status()
     # A generous grace (a busy machine may be slow to schedule licvdb): licvdb must stop on SIGINT
