@@ -20,7 +20,7 @@ import bpy
 from mathutils import Matrix, Vector
 
 from . import manifest as mf
-from . import engine, ops_import, prefs, props
+from . import engine, ops_import, prefs, props, seeds
 
 
 class BakeError(Exception):
@@ -78,6 +78,21 @@ def domain_placement(obj, ds, cache_voxel: float) -> Matrix:
     return obj.matrix_world @ Matrix.Translation(lower + 0.5 * cell) @ scale
 
 
+def cache_voxel_size(path: str) -> float:
+    """The voxel size of the velocity grid in the cache file ``path`` (read by Blender). Raises BakeError."""
+    probe = bpy.data.volumes.new("licvdb cache probe")
+    try:
+        probe.filepath = path
+        if not probe.grids.load():
+            raise BakeError(f"Blender cannot read {path}: {probe.grids.error_message or 'unknown error'}")
+        grid = probe.grids.get("velocity") or (probe.grids[0] if len(probe.grids) else None)
+        if grid is None:
+            raise BakeError(f"{path} has no grids")
+        return grid.matrix_object.to_scale()[0]
+    finally:
+        bpy.data.volumes.remove(probe)
+
+
 # --- recipes and the subprocess -------------------------------------------------------------------
 
 def make_recipe(settings, field_path: str, out_path: str, loop_frames: int = 1, grid: str = "velocity") -> dict:
@@ -86,7 +101,9 @@ def make_recipe(settings, field_path: str, out_path: str, loop_frames: int = 1, 
     recipe = {
         "field": {"path": field_path, "grid": grid},
         "output": {"path": out_path, "upsample": settings.upsample},
-        "input": {"type": "noise", "seed": settings.seed},
+        "input": ({"type": "noise", "seed": settings.seed} if settings.input_type == "noise" else
+                  {"type": "spots", "seed": settings.seed, "spacing": settings.spot_spacing,
+                   "radii": [settings.spot_radius]}),
         "lic": {"kernel": settings.kernel, "length": settings.length},
         "animation": {"frames": loop_frames},
         "threads": settings.threads,
@@ -118,8 +135,21 @@ def new_bake_base(out_dir: str, stem: str) -> str:
 
 def settings_dict(settings) -> dict:
     """The scene's bake settings (``scene.licvdb_bake``) as a plain dict, for a result to remember."""
-    return {p.identifier: getattr(settings, p.identifier) for p in settings.bl_rna.properties
-            if p.identifier not in ("rna_type", "name")}
+    out = {}
+    for p in settings.bl_rna.properties:
+        if p.identifier in ("rna_type", "name"):
+            continue
+        value = getattr(settings, p.identifier)
+        out[p.identifier] = value.name if isinstance(value, bpy.types.ID) else value  # (the seed object: its name)
+    return out
+
+
+def add_seeds(context, settings, recipe: dict, base: str, to_field=None, unsteady: str = "") -> str:
+    """seeds.apply (the seed object's points as the recipe's spots), its errors as BakeError."""
+    try:
+        return seeds.apply(context, settings, recipe, base, to_field, unsteady)
+    except seeds.SeedError as e:
+        raise BakeError(str(e)) from None
 
 
 def record_source(obj, kind: str, used: dict, source_object=None, source_path: str = "", grid: str = ""):
@@ -287,6 +317,10 @@ class BakeJob:
         self._remove_outputs()
 
     def _remove_outputs(self):
+        for _, recipe in self.tasks:  # the seeds the add-on wrote beside the output (seeds.apply)
+            written = recipe.get("input", {}).get("seeds", "")
+            if written.endswith(".seeds.txt") and os.path.isfile(written):
+                os.remove(written)
         for _, out, summary in self.done_outputs:
             written = list(summary.get("files", [])) + [summary.get("manifest", "")]
             if not summary:  # no summary to go by: the still and its manifest
@@ -336,11 +370,16 @@ def plan_bake(context, obj):
         # frame rate (slowed by the simulation's time scale) gives the time between frames.
         fps = context.scene.render.fps / context.scene.render.fps_base
         recipe["field"]["fps"] = fps / max(ds.time_scale, 1e-6)
+        add_seeds(context, settings, recipe, base, unsteady=f"the frame range {frames[0]}-{frames[-1]}")
         tasks = [(f"frames {frames[0]}-{frames[-1]}", recipe)]
         outs = [f"{base}_{f:04d}.vdb" for f in frames]
     else:
         out = f"{base}_f{frames[0]:04d}.vdb"
-        tasks = [(f"frame {frames[0]}", make_recipe(settings, cache_data_file(ds, frames[0]), out, settings.loop_frames))]
+        recipe = make_recipe(settings, cache_data_file(ds, frames[0]), out, settings.loop_frames)
+        if settings.seed_object is not None:  # world → the cache's coordinates (domain_placement inverted)
+            to_field = domain_placement(obj, ds, cache_voxel_size(cache_data_file(ds, frames[0]))).inverted()
+            add_seeds(context, settings, recipe, base, to_field)
+        tasks = [(f"frame {frames[0]}", recipe)]
         outs = [out]
     job = BakeJob(exe, tasks)
     domain_name = obj.name

@@ -13,8 +13,8 @@ import bpy
 from bpy_extras.io_utils import ImportHelper
 
 from . import ops_import, prefs
-from .ops_bake import (BakeError, BakeJob, BakeRunner, make_recipe, new_bake_base, output_dir, record_source,
-                       settings_dict)
+from .ops_bake import (BakeError, BakeJob, BakeRunner, add_seeds, make_recipe, new_bake_base, output_dir,
+                       record_source, settings_dict)
 
 
 def plan_file_bake(context, field_path: str, grid: str = ""):
@@ -33,6 +33,7 @@ def plan_file_bake(context, field_path: str, grid: str = ""):
     base = new_bake_base(out_dir, stem)
     loops = settings.loop_frames
     recipe = make_recipe(settings, field_path, f"{base}.vdb", loops, grid=grid)
+    add_seeds(context, settings, recipe, base)  # the result sits at the field's own coordinates
     job = BakeJob(exe, [(os.path.basename(field_path), recipe)])
     first = f"{base}_0001.vdb" if loops > 1 else f"{base}.vdb"  # a loop: OUT_0001.vdb … and one manifest
     used = settings_dict(settings)
@@ -86,7 +87,8 @@ class LICVDB_OT_bake_file(BakeRunner, bpy.types.Operator, ImportHelper):
         s = context.scene.licvdb_bake
         col = layout.column(align=True)
         col.label(text="Scene bake settings:")
-        for name in ("length", "upsample", "kernel", "seed", "color_scalar", "colormap", "loop_frames",
+        for name in ("length", "upsample", "kernel", "seed", "input_type", "spot_spacing", "spot_radius",
+                     "seed_object", "seed_mode", "seed_spacing", "color_scalar", "colormap", "loop_frames",
                      "output_dir", "threads"):
             col.prop(s, name)
 

@@ -28,8 +28,8 @@ import bpy
 from mathutils import Matrix
 
 from . import ops_import, prefs, props
-from .ops_bake import (BakeError, BakeJob, BakeRunner, make_recipe, new_bake_base, output_dir, record_source,
-                       settings_dict)
+from .ops_bake import (BakeError, BakeJob, BakeRunner, add_seeds, make_recipe, new_bake_base, output_dir,
+                       record_source, settings_dict)
 
 #: Vec3 grid names tried in order (licvdb's own default order).
 VELOCITY_NAMES = ("velocity", "vel", "v")
@@ -150,10 +150,13 @@ def plan_volume_bake(context, obj):
         recipe["field"]["frames"] = [frames[0], frames[-1]]
         # Velocities in world units per second (OpenVDB's convention); one frame lasts 1/fps s.
         recipe["field"]["fps"] = context.scene.render.fps / context.scene.render.fps_base
+        add_seeds(context, settings, recipe, base, unsteady=f"volume sequence {vol.name}")
         label = f"{obj.name} frames {frames[0]}-{frames[-1]}"
         outs = [f"{base}_{n:04d}.vdb" for n in frames]
     else:
         recipe = make_recipe(settings, field, f"{base}.vdb", settings.loop_frames, grid=grid)
+        # The result is drawn in the source's local space: world → the field's coordinates.
+        add_seeds(context, settings, recipe, base, obj.matrix_world.inverted())
         label = obj.name
         outs = [f"{base}_0001.vdb" if settings.loop_frames > 1 else f"{base}.vdb"]
     job = BakeJob(exe, [(label, recipe)])

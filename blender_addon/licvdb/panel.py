@@ -75,6 +75,19 @@ class LICVDB_PT_bake(bpy.types.Panel):
         col.prop(s, "kernel")
         col.prop(s, "seed")
         col = layout.column(align=True)
+        col.prop(s, "seed_object")
+        if s.seed_object is not None:
+            col.row().prop(s, "seed_mode", expand=True)
+            col.prop(s, "seed_spacing")
+        row = col.row()
+        row.enabled = s.seed_object is None  # a seed object always bakes spots
+        row.prop(s, "input_type", expand=True)
+        if s.input_type == "spots" or s.seed_object is not None:
+            sub = col.row()
+            sub.enabled = s.seed_object is None
+            sub.prop(s, "spot_spacing")
+            col.prop(s, "spot_radius")
+        col = layout.column(align=True)
         col.prop(s, "color_scalar")
         sub = col.row()
         sub.enabled = s.color_scalar != "NONE"

@@ -5,7 +5,7 @@ from contextlib import contextmanager
 
 import bpy
 
-from . import material
+from . import material, seeds
 
 
 def look_of(obj) -> material.Look:
@@ -149,6 +149,27 @@ class LICVDB_BakeSettings(bpy.types.PropertyGroup):
                                                          ("exp", "Oriented", "Tapered streamlets, bright head downstream")],
                                    default="box")
     seed: bpy.props.IntProperty(name="Seed", default=1, min=0)
+    input_type: bpy.props.EnumProperty(
+        name="Input", items=[("noise", "Noise", "White noise: dense, fur-like texture"),
+                             ("spots", "Spots", "Sparse spots: separate lines (with halos)")],
+        default="noise", description="The texture the LIC smears (a seed object always bakes spots)")
+    spot_spacing: bpy.props.FloatProperty(name="Spot spacing", default=6.0, min=0.5, soft_max=64.0,
+                                          description="Spots: distance between spot centres, output voxels "
+                                                      "(licvdb's input.spacing)")
+    spot_radius: bpy.props.FloatProperty(name="Spot radius", default=1.0, min=0.1, soft_max=8.0,
+                                         description="Spots: line radius, output voxels")
+    seed_object: bpy.props.PointerProperty(
+        name="Seed object", type=bpy.types.Object, poll=seeds.seed_object_poll,
+        description="A Mesh object whose surface or inside gives the spot centres (sampled in world space at "
+                    "every bake and re-bake); empty = the usual spot distribution")
+    seed_mode: bpy.props.EnumProperty(
+        name="Seeds", items=[("SURFACE", "Surface", "Points spread over the mesh's faces, about Seed spacing apart"),
+                             ("INSIDE", "Inside", "A lattice of pitch Seed spacing inside the closed mesh")],
+        default="SURFACE")
+    seed_spacing: bpy.props.FloatProperty(name="Seed spacing", default=0.5, min=1e-4, soft_max=100.0, precision=4,
+                                          subtype="DISTANCE",
+                                          description="Distance between seed points on or in the seed object, in "
+                                                      "world units (not output voxels)")
     color_scalar: bpy.props.EnumProperty(name="Colour by", items=SCALARS, default="speed")
     colormap: bpy.props.EnumProperty(name="Colormap", items=COLORMAPS, default="viridis")
     loop_frames: bpy.props.IntProperty(name="Loop frames", default=1, min=1, max=1000,
