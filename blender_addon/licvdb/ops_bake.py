@@ -413,8 +413,8 @@ def plan_bake(context, obj):
 class BakeRunner:
     """What the bake operators share (a mix-in before ``bpy.types.Operator``): the subclass's
     ``plan(context)`` returns ``(BakeJob, finish)`` or raises BakeError; ``run_blocking`` runs the
-    job to its end (execute: scripts, background mode), ``run_modal`` runs it from a timer with a
-    progress bar and status text, Esc cancelling (invoke). ``finish(context)`` imports the
+    job to its end (the default execute: scripts, background mode), ``run_modal`` runs it from a
+    timer with a progress bar and status text, Esc cancelling (the default invoke). ``finish(context)`` imports the
     result and returns the new object; every failure is reported."""
 
     timeout: bpy.props.FloatProperty(name="Timeout", default=0.0, min=0.0, options={"SKIP_SAVE"},
@@ -428,6 +428,12 @@ class BakeRunner:
 
     def plan(self, context):
         raise NotImplementedError
+
+    def execute(self, context):  # blocking (scripts, background mode)
+        return self.run_blocking(context)
+
+    def invoke(self, context, event):  # interactive: modal with a timer, Esc cancels
+        return self.run_modal(context)
 
     def _start(self, context) -> bool:
         try:
@@ -518,12 +524,6 @@ class LICVDB_OT_bake_fluid(BakeRunner, bpy.types.Operator):
 
     def plan(self, context):
         return plan_bake(context, context.active_object)
-
-    def execute(self, context):  # blocking (scripts, background mode)
-        return self.run_blocking(context)
-
-    def invoke(self, context, event):  # interactive: modal with a timer, Esc cancels
-        return self.run_modal(context)
 
 
 classes = (LICVDB_OT_bake_fluid,)

@@ -187,6 +187,11 @@ def plan_volume_bake(context, obj):
     return job, finish
 
 
+def is_source_volume(obj) -> bool:
+    """Whether ``obj`` is a Volume object that can be baked from (not a licvdb result)."""
+    return obj is not None and obj.type == "VOLUME" and not obj.licvdb.is_bake
+
+
 class LICVDB_OT_bake_volume(BakeRunner, bpy.types.Operator):
     """Bake LIC from the active Volume object's velocity grid (a sequence: every frame, as one unsteady
     sequence) with the scene's licvdb bake settings, and import it onto the volume"""
@@ -197,17 +202,10 @@ class LICVDB_OT_bake_volume(BakeRunner, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        obj = context.active_object
-        return obj is not None and obj.type == "VOLUME" and not obj.licvdb.is_bake
+        return is_source_volume(context.active_object)
 
     def plan(self, context):
         return plan_volume_bake(context, context.active_object)
-
-    def execute(self, context):  # blocking (scripts, background mode)
-        return self.run_blocking(context)
-
-    def invoke(self, context, event):  # interactive: modal with a timer, Esc cancels
-        return self.run_modal(context)
 
 
 classes = (LICVDB_OT_bake_volume,)

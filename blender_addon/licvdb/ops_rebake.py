@@ -126,11 +126,5 @@ class LICVDB_OT_rebake(BakeRunner, bpy.types.Operator):
     def plan(self, context):
         return plan_rebake(context, context.active_object)
 
-    def execute(self, context):  # blocking (scripts, background mode)
-        return self.run_blocking(context)
-
-    def invoke(self, context, event):  # interactive: modal with a timer, Esc cancels
-        return self.run_modal(context)
-
 
 classes = (LICVDB_OT_rebake,)

@@ -4,7 +4,7 @@ in Properties > Object Data of a volume."""
 
 import bpy
 
-from . import compat, ops_bake, prefs
+from . import compat, ops_bake, ops_bake_volume, prefs
 
 
 class LICVDB_PT_look(bpy.types.Panel):
@@ -131,11 +131,21 @@ def draw_bake_volume(layout, context):
 
 
 def _is_source_volume(context) -> bool:
-    obj = context.active_object
-    return obj is not None and obj.type == "VOLUME" and not obj.licvdb.is_bake
+    return ops_bake_volume.is_source_volume(context.active_object)
 
 
-class LICVDB_PT_bake_volume(bpy.types.Panel):
+class _BakeVolumePanel:
+    """Shown for a Volume object that can be baked from (a mix-in before bpy.types.Panel)."""
+
+    @classmethod
+    def poll(cls, context):
+        return _is_source_volume(context)
+
+    def draw(self, context):
+        draw_bake_volume(self.layout, context)
+
+
+class LICVDB_PT_bake_volume(_BakeVolumePanel, bpy.types.Panel):
     """3D view sidebar: bake LIC from the active Volume object."""
 
     bl_label = "Bake LIC from volume"
@@ -144,15 +154,8 @@ class LICVDB_PT_bake_volume(bpy.types.Panel):
     bl_region_type = "UI"
     bl_category = "licvdb"
 
-    @classmethod
-    def poll(cls, context):
-        return _is_source_volume(context)
 
-    def draw(self, context):
-        draw_bake_volume(self.layout, context)
-
-
-class LICVDB_PT_volume_data(bpy.types.Panel):
+class LICVDB_PT_volume_data(_BakeVolumePanel, bpy.types.Panel):
     """Properties > Object Data of a volume: bake LIC from it."""
 
     bl_label = "licvdb: Bake LIC"
@@ -160,13 +163,6 @@ class LICVDB_PT_volume_data(bpy.types.Panel):
     bl_space_type = "PROPERTIES"
     bl_region_type = "WINDOW"
     bl_context = "data"
-
-    @classmethod
-    def poll(cls, context):
-        return _is_source_volume(context)
-
-    def draw(self, context):
-        draw_bake_volume(self.layout, context)
 
 
 classes = (LICVDB_PT_look, LICVDB_PT_bake, LICVDB_PT_bake_volume, LICVDB_PT_volume_data)
