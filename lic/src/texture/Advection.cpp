@@ -338,7 +338,42 @@ void AdvectedNoise::unpack(const std::string& bytes)
 
 // ---- SpotFlock ---------------------------------------------------------------------------------
 
-void SpotFlock::start(const SpotSet& spots)
+namespace {
+
+/// A frame's birth candidates: the placement at half the spacing (this frame's seed) inside the
+/// active voxels, in a hashed order (so births up to a budget spread over all the room there is).
+std::vector<openvdb::Vec3d> birthCandidates(const OutputDomain& domain, SpotPlacement p, int frame)
+{
+    const openvdb::CoordBBox ib = domain.indexBBox();
+    const openvdb::BBoxd box(ib.min().asVec3d() - openvdb::Vec3d(0.5), ib.max().asVec3d() + openvdb::Vec3d(0.5));
+    const std::uint64_t seed = hashCoord(p.seed, frame, 0x59A7, 0x0F10C);
+    p.seed = seed;
+    p.spacing *= 0.5; // dense candidates, so a gap is found wherever it opens
+    std::vector<std::pair<std::uint64_t, openvdb::Vec3d>> keyed;
+    int i = 0;
+    for (const openvdb::Vec3d& c : placeSpots(p, box)) {
+        ++i;
+        if (domain.slotOf(OutputDomain::nearestVoxel(c)) >= 0) keyed.emplace_back(hashCoord(seed, i, 0xB1A7, 0x0DE5), c);
+    }
+    std::sort(keyed.begin(), keyed.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    std::vector<openvdb::Vec3d> out;
+    out.reserve(keyed.size());
+    for (const auto& k : keyed) out.push_back(k.second);
+    return out;
+}
+
+/// Whether a point at c would have come in from outside the active voxels within the last
+/// `frames` frames (traced back over dt each, in this frame's flow).
+bool cameInWithin(const OutputDomain& domain, const VelocityField& field, openvdb::Vec3d c, double dt, int frames)
+{
+    for (int k = 0; k < frames; ++k)
+        if (!traceForward(domain, field, c, -dt) || domain.slotOf(OutputDomain::nearestVoxel(c)) < 0) return true;
+    return false;
+}
+
+} // namespace
+
+void SpotFlock::start(const SpotSet& spots, const OutputDomain& domain)
 {
     mSpots.clear();
     mNextId = 0;
@@ -350,6 +385,7 @@ void SpotFlock::start(const SpotSet& spots)
         s.roi = i < spots.weights.size() ? spots.weights[i] : 1.0f;
         mSpots.push_back(s);
     }
+    mPerVoxel = double(mSpots.size()) / double(std::max<std::uint64_t>(1, domain.activeVoxelCount()));
     mStats = {};
     mStats.alive = mSpots.size();
 }
@@ -391,31 +427,32 @@ void SpotFlock::advance(const OutputDomain& domain, const VelocityField& field, 
     const double d = mParams.placement.spacing;
     const double rRetire = 0.5 * kPoissonRadius * d, rNew = kPoissonRadius * d;
     std::sort(kept.begin(), kept.end(), [](const Spot& a, const Spot& b) { return a.id < b.id; });
-    PointGrid living(rNew);
+    PointGrid alive(rNew);
     for (Spot& s : kept) {
-        if (s.dying < 0 && living.anyWithin(s.c, rRetire)) s.dying = 0;
-        if (s.dying < 0) living.insert(s.c);
+        if (s.dying < 0 && alive.anyWithin(s.c, rRetire)) s.dying = 0;
+        if (s.dying < 0) alive.insert(s.c);
         else ++st.retiring;
     }
-    // 3. New spots where the flow opened space: this frame's candidates, at the placement
-    //    distance from every living spot and from each other.
-    const openvdb::CoordBBox ib = domain.indexBBox();
-    const openvdb::BBoxd box(ib.min().asVec3d() - openvdb::Vec3d(0.5), ib.max().asVec3d() + openvdb::Vec3d(0.5));
-    SpotPlacement p = mParams.placement;
-    p.seed = hashCoord(mParams.placement.seed, frame, 0x59A7, 0x0F10C);
-    p.spacing = 0.5 * d; // dense candidates, so a gap is filled wherever it opens
-    for (const openvdb::Vec3d& c : placeSpots(p, box)) {
-        if (domain.slotOf(OutputDomain::nearestVoxel(c)) < 0) continue;
-        if (living.anyWithin(c, rNew)) continue;
+    // 3. New spots where the flow opened space, as many as keep frame one's number per active
+    //    voxel: this frame's candidates, at the placement distance from every living spot and
+    //    from each other. One that would have come in from outside within the fade time starts
+    //    at full weight (it stands for a spot that came in whole); one born deeper fades in.
+    const std::size_t target = std::size_t(std::llround(mPerVoxel * double(domain.activeVoxelCount())));
+    std::size_t living = 0;
+    for (const Spot& s : kept) living += s.dying < 0;
+    for (const openvdb::Vec3d& c : birthCandidates(domain, mParams.placement, frame)) {
+        if (living >= target) break;
+        if (alive.anyWithin(c, rNew)) continue;
         const float w = accept ? accept(c) : 1.0f;
         if (w <= 0.0f) continue;
         Spot s;
         s.c = c;
         s.id = mNextId++;
-        s.age = 0;
+        s.age = cameInWithin(domain, field, c, dt, mParams.fadeFrames) ? mParams.fadeFrames : 0;
         s.roi = w;
         kept.push_back(s);
-        living.insert(c);
+        alive.insert(c);
+        ++living;
         ++st.born;
     }
     mSpots.swap(kept);

@@ -254,7 +254,7 @@ Input CarriedTexture::spots(int k, double dt, const Plan& plan, const FieldShare
         params.placement = {lic::spotDistributionFromString(mRecipe.input.distribution), mRecipe.input.spacing,
                             mRecipe.input.jitter, mRecipe.input.seed};
         mFlock.emplace(params);
-        mFlock->start(input.spots);
+        mFlock->start(input.spots, domain);
     } else {
         lic::SpotFlock::Accept accept;
         std::optional<lic::ScalarField> roi;

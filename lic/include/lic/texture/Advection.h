@@ -12,9 +12,15 @@
 //
 // Spots: particles. They move with the flow (midpoint rule), leave when they leave the active
 // domain, fade out over a few frames when another spot comes closer than half the placement
-// distance (older spots win), and new ones fade in where the flow opens space (candidates from
-// the recipe's distribution, a new seed per frame, kept at the placement distance from every
-// spot). So the density of lines stays steady and nothing pops.
+// distance (older spots win), and new ones are born where the flow opens space (candidates from
+// the recipe's distribution at half the spacing, a new seed per frame, taken in a hashed order,
+// kept at the placement distance from every spot). Births replace what left or retired one for
+// one: the number of living spots stays frame one's number per active voxel, whatever the speed
+// (filling every gap as it opened packed incoming spots closer than frame one's Poisson
+// placement: +6 to +15 % over 40 frames, more the slower the flow). A spot born where the flow
+// just entered (its position one frame back is outside the active voxels) comes in at full
+// weight, as the ones that leave go at once; one born inside fades in. So the density of lines and
+// the brightness stay steady and nothing pops inside the domain.
 //
 // Everything is deterministic: per-voxel work reads only the previous frame's state, and spots
 // are handled in one fixed order.
@@ -130,8 +136,9 @@ public:
 
     explicit SpotFlock(const Params& params) : mParams(params) {}
 
-    /// Frame one: these spots (a still bake's), at full weight.
-    void start(const SpotSet& spots);
+    /// Frame one: these spots (a still bake's), at full weight, over `domain`'s active voxels
+    /// (their number per active voxel is what later frames keep).
+    void start(const SpotSet& spots, const OutputDomain& domain);
     /// The next frame: move every spot over `dt` along `field`, drop those that left `domain`'s
     /// active voxels, retire crowded ones, add new ones where there is room. `frame` (2, 3, …)
     /// seeds the new spots' placement.
@@ -161,6 +168,7 @@ private:
     float weightOf(const Spot& s) const;
 
     Params mParams;
+    double mPerVoxel = 0.0; ///< living spots per active voxel (frame one's)
     std::vector<Spot> mSpots;
     std::uint64_t mNextId = 0;
     Stats mStats;
