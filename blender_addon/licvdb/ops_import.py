@@ -9,7 +9,7 @@ from bpy_extras.io_utils import ImportHelper
 from . import manifest as mf
 from mathutils import Matrix, Vector
 
-from . import check, compat, material, prefs, props
+from . import check, compat, material, prefs, preview, props
 
 
 #: (brightness, line absorption) for dense (noise) bakes; sparse line bakes keep the panel's
@@ -36,7 +36,8 @@ def bake_files(path: str):
 
 
 def import_bake(context, path: str, frame_start: int | None = None, setup_render: bool = True,
-                name: str | None = None, sequence_mode: str | None = None, files=None):
+                name: str | None = None, sequence_mode: str | None = None, files=None,
+                surface_preview: bool | None = None):
     """Create a Volume object for the bake ``path`` belongs to and give it the LIC look.
 
     Grids stay where licvdb put them in world space: the object has the identity transform, or
@@ -44,7 +45,8 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
     A loop (or any numbered sequence) becomes a volume sequence starting at ``frame_start``
     (default: an unsteady sequence's first frame, else the scene's start frame); cyclic bakes
     repeat forever, sequences play once (CLIP). ``files`` overrides the
-    file list (frames of a sequence baked one by one). Raises BakeImportError.
+    file list (frames of a sequence baked one by one). ``surface_preview``: give it the viewport's
+    surface preview (preview.py); None = on in the UI, off in background mode. Raises BakeImportError.
     """
     if files:
         man = mf.find_manifest(files[0])
@@ -109,6 +111,10 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
             # and just under the surface show instead of a glow summed through the volume.
             s.brightness, s.line_absorption = DENSE_LOOK
     props.apply_look(obj)
+    if surface_preview is None:
+        surface_preview = not bpy.app.background
+    if surface_preview:
+        preview.set_preview(context, obj, True)
 
     for o in context.view_layer.objects:
         o.select_set(False)
@@ -163,6 +169,10 @@ class LICVDB_OT_import_bake(bpy.types.Operator, ImportHelper):
     directory: bpy.props.StringProperty(subtype="DIR_PATH", options={"HIDDEN", "SKIP_SAVE"})
     setup_render: bpy.props.BoolProperty(name="Set up render", default=True,
                                          description="Cycles, black world, volume step, no denoising without OIDN")
+    surface_preview: bpy.props.BoolProperty(
+        name="Surface preview", default=True,
+        description="Show the lines in Solid and Material Preview as a surface (Volume to Mesh at the lines' "
+                    "iso level; not in final renders). In background mode only when set")
 
     def invoke(self, context, event):
         # Files given by the caller (drag and drop, a script) import at once; otherwise open the
@@ -180,7 +190,11 @@ class LICVDB_OT_import_bake(bpy.types.Operator, ImportHelper):
             self.report({"ERROR"}, "no file given: choose a licvdb .vdb file")
             return {"CANCELLED"}
         try:
-            objects = import_paths(context, [bpy.path.abspath(p) for p in paths], setup_render=self.setup_render)
+            # The checkbox in the UI; in background mode only when the caller asks for it.
+            asked = self.properties.is_property_set("surface_preview") or not bpy.app.background
+            surface = self.surface_preview and asked
+            objects = import_paths(context, [bpy.path.abspath(p) for p in paths], setup_render=self.setup_render,
+                                   surface_preview=surface)
         except (BakeImportError, mf.ManifestError, check.FileCheckError) as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}

@@ -13,7 +13,7 @@ parent and animation. The old files stay on disk.
 import bpy
 from mathutils import Matrix, Vector
 
-from . import compat, ops_bake_file, ops_bake_volume, props
+from . import compat, ops_bake_file, ops_bake_volume, preview, props
 from .ops_bake import BakeError, BakeRunner, plan_bake
 
 #: The Volume settings a bake's import sets and a re-bake carries over.
@@ -92,6 +92,7 @@ def swap_bake(context, old, new) -> bool:
     if "licvdb_field" in new:
         old["licvdb_field"] = new["licvdb_field"]
     mats = [m for m in nv.materials if m is not None]
+    preview.remove_preview(new)  # (the old object keeps its own: its modifier reads the swapped files)
     bpy.data.objects.remove(new)
     bpy.data.volumes.remove(nv)
     for m in mats:
