@@ -19,10 +19,10 @@ bl_info = {
 import bpy
 
 from . import (engine, manifest, material, ops_bake, ops_bake_file, ops_bake_volume, ops_import,  # noqa: F401
-               ops_rebake, panel, prefs, preview, props)  # (public modules)
+               ops_rebake, panel, prefs, presets, preview, props)  # (public modules)
 
 _classes = (*prefs.classes, *props.classes, *ops_import.classes, *ops_bake.classes, *ops_bake_file.classes,
-            *ops_bake_volume.classes, *ops_rebake.classes, *panel.classes, *preview.classes)
+            *ops_bake_volume.classes, *ops_rebake.classes, *presets.classes, *panel.classes, *preview.classes)
 
 
 def register():

@@ -20,7 +20,7 @@ import bpy
 from mathutils import Matrix, Vector
 
 from . import manifest as mf
-from . import engine, ops_import, prefs, props, seeds
+from . import engine, ops_import, prefs, progress, props, roi, seeds
 
 
 class BakeError(Exception):
@@ -103,16 +103,29 @@ def make_recipe(settings, field_path: str, out_path: str, loop_frames: int = 1, 
         "output": {"path": out_path, "upsample": settings.upsample},
         "input": ({"type": "noise", "seed": settings.seed} if settings.input_type == "noise" else
                   {"type": "spots", "seed": settings.seed, "spacing": settings.spot_spacing,
-                   "radii": [settings.spot_radius]}),
+                   "radii": [settings.spot_radius], "halo_scale": settings.halo_scale}),
         "lic": {"kernel": settings.kernel, "length": settings.length},
         "animation": {"frames": loop_frames},
         "threads": settings.threads,
     }
     if not grid:
         del recipe["field"]["grid"]
+    if settings.kernel == "exp":
+        recipe["lic"]["decay"] = settings.decay
     if settings.color_scalar != "NONE":
         recipe["color"] = {"scalar": settings.color_scalar, "colormap": settings.colormap}
+    if settings.roi_scalar != "NONE":
+        recipe["roi"] = roi_recipe(settings)
     return recipe
+
+
+def roi_recipe(settings) -> dict:
+    """The recipe's ``roi`` from the bake settings; a range relative to the top speed is written
+    as ``{"fraction_of_top_speed": [lo, hi]}`` for BakeJob to resolve (roi.py)."""
+    lo, hi = sorted(settings.roi_range)
+    relative = settings.roi_relative and settings.roi_scalar == "speed"
+    return {"scalar": settings.roi_scalar, "range": {roi.RELATIVE: [lo, hi]} if relative else [lo, hi],
+            "mode": settings.roi_mode}
 
 
 def output_dir(settings, default: str) -> str:
@@ -140,7 +153,11 @@ def settings_dict(settings) -> dict:
         if p.identifier in ("rna_type", "name"):
             continue
         value = getattr(settings, p.identifier)
-        out[p.identifier] = value.name if isinstance(value, bpy.types.ID) else value  # (the seed object: its name)
+        if isinstance(value, bpy.types.ID):
+            value = value.name  # (the seed object: its name)
+        elif getattr(p, "is_array", False):
+            value = list(value)  # (the region's range)
+        out[p.identifier] = value
     return out
 
 
@@ -150,6 +167,24 @@ def add_seeds(context, settings, recipe: dict, base: str, to_field=None, unstead
         return seeds.apply(context, settings, recipe, base, to_field, unsteady)
     except seeds.SeedError as e:
         raise BakeError(str(e)) from None
+
+
+def unsteady_recipe(context, settings, pattern: str, frames: list, base: str, fps: float, unsteady: str,
+                    grid: str = "velocity"):
+    """(recipe, output files) of ONE unsteady sequence over the field files ``pattern`` (``####`` =
+    the frame number) numbered ``frames`` (consecutive): licvdb writes ``BASE_FFFF.vdb`` numbered as
+    the field's frames and one manifest; ``fps`` frames per second turn velocities (world units per
+    second) into motion between frames. ``unsteady`` names the sequence in errors (a seed object
+    is refused). Raises BakeError."""
+    recipe = make_recipe(settings, pattern, f"{base}.vdb", 1, grid=grid)
+    recipe["field"]["frames"] = [frames[0], frames[-1]]
+    recipe["field"]["fps"] = fps
+    add_seeds(context, settings, recipe, base, unsteady=unsteady)
+    return recipe, [f"{base}_{f:04d}.vdb" for f in frames]
+
+
+def scene_fps(scene) -> float:
+    return scene.render.fps / scene.render.fps_base
 
 
 def record_source(obj, kind: str, used: dict, source_object=None, source_path: str = "", grid: str = ""):
@@ -201,7 +236,8 @@ class BakeJob:
     def fraction(self) -> float:
         """Overall progress in [0, 1]: finished tasks plus the running task's stage fraction."""
         self._read_progress()
-        return min(1.0, (len(self.done_outputs) + max(0.0, self.stage_fraction)) / max(1, len(self.tasks)))
+        running = progress.task_fraction(self.stage, self.stage_fraction) if self.stage else 0.0
+        return min(1.0, (len(self.done_outputs) + running) / max(1, len(self.tasks)))
 
     def _read_progress(self):
         """Parse the newest ``progress FRACTION STAGE`` line licvdb wrote (``--progress lines``)."""
@@ -229,14 +265,22 @@ class BakeJob:
         n = len(self.tasks)
         label = self.tasks[self.index][0] if 0 <= self.index < n else ""
         stage = f", {self.stage} {100 * self.stage_fraction:.0f}%" if self.stage and self.stage_fraction >= 0 else ""
+        elapsed = time.monotonic() - self.started
+        eta = progress.eta_text(elapsed, self.fraction)
         return (f"licvdb: baking {label} ({min(self.index + 1, n)}/{n}{stage}), "
-                f"{time.monotonic() - self.started:.0f} s, Esc to cancel")
+                f"{elapsed:.0f} s{', ' + eta if eta else ''}, Esc to cancel")
 
     def _start_next(self):
         self.index += 1
         if self.index >= len(self.tasks):
             return
         label, recipe = self.tasks[self.index]
+        try:
+            roi.resolve(self.executable, recipe)  # a region relative to the top speed → the field's speeds
+        except roi.RoiError as e:
+            self.error = f"licvdb bake of {label}: region of interest: {e}"
+            self._remove_outputs()
+            return
         recipe_path = os.path.join(self.workdir, f"recipe_{self.index:04d}.json")
         with open(recipe_path, "w", encoding="utf-8") as f:
             json.dump(recipe, f, indent=2)
@@ -364,15 +408,12 @@ def plan_bake(context, obj):
     if len(frames) > 1:
         # One coherent unsteady sequence: the texture is carried by the smoke from frame to frame
         # (licvdb writes BASE_FFFF.vdb numbered as the cache, and one manifest).
-        recipe = make_recipe(settings, cache_data_pattern(ds), f"{base}.vdb", 1)
-        recipe["field"]["frames"] = [frames[0], frames[-1]]
         # Mantaflow's velocities are converted to world units per second by licvdb; the scene's
         # frame rate (slowed by the simulation's time scale) gives the time between frames.
-        fps = context.scene.render.fps / context.scene.render.fps_base
-        recipe["field"]["fps"] = fps / max(ds.time_scale, 1e-6)
-        add_seeds(context, settings, recipe, base, unsteady=f"the frame range {frames[0]}-{frames[-1]}")
+        recipe, outs = unsteady_recipe(context, settings, cache_data_pattern(ds), frames, base,
+                                       scene_fps(context.scene) / max(ds.time_scale, 1e-6),
+                                       f"the frame range {frames[0]}-{frames[-1]}")
         tasks = [(f"frames {frames[0]}-{frames[-1]}", recipe)]
-        outs = [f"{base}_{f:04d}.vdb" for f in frames]
     else:
         out = f"{base}_f{frames[0]:04d}.vdb"
         recipe = make_recipe(settings, cache_data_file(ds, frames[0]), out, settings.loop_frames)
@@ -423,8 +464,11 @@ class BakeRunner:
     _timer = None
     _job = None
     _finish = None
+    _look = None  # the scene's look for new bakes when the bake was planned (props.scene_look)
     #: What the report says was done with the result ("licvdb: baked and imported OBJ in 3.1 s").
     done_verb = "baked and imported"
+    #: Whether the result gets the bake settings' look (Set look); a re-bake keeps its object's.
+    sets_look = True
 
     def plan(self, context):
         raise NotImplementedError
@@ -441,6 +485,7 @@ class BakeRunner:
         except BakeError as e:
             self.report({"ERROR"}, str(e))
             return False
+        self._look = props.scene_look(context.scene.licvdb_bake) if self.sets_look else None
         return True
 
     def _complete(self, context):
@@ -453,6 +498,7 @@ class BakeRunner:
             return {"CANCELLED"}
         try:
             obj = self._finish(context)
+            props.apply_scene_look(obj, self._look)
         except Exception as e:  # report (and print the traceback), never swallow
             traceback.print_exc()
             self.report({"ERROR"}, f"baked, but the import failed: {e}")

@@ -29,7 +29,7 @@ from mathutils import Matrix
 
 from . import ops_import, prefs, props
 from .ops_bake import (BakeError, BakeJob, BakeRunner, add_seeds, make_recipe, new_bake_base, output_dir,
-                       record_source, settings_dict)
+                       record_source, scene_fps, settings_dict, unsteady_recipe)
 
 #: Vec3 grid names tried in order (licvdb's own default order).
 VELOCITY_NAMES = ("velocity", "vel", "v")
@@ -146,13 +146,10 @@ def plan_volume_bake(context, obj):
     if frames is not None:
         if settings.loop_frames > 1:
             raise BakeError(f"volume {vol.name} is a sequence, baked as one unsteady sequence: set Loop frames to 1")
-        recipe = make_recipe(settings, field, f"{base}.vdb", 1, grid=grid)
-        recipe["field"]["frames"] = [frames[0], frames[-1]]
         # Velocities in world units per second (OpenVDB's convention); one frame lasts 1/fps s.
-        recipe["field"]["fps"] = context.scene.render.fps / context.scene.render.fps_base
-        add_seeds(context, settings, recipe, base, unsteady=f"volume sequence {vol.name}")
+        recipe, outs = unsteady_recipe(context, settings, field, frames, base, scene_fps(context.scene),
+                                       f"volume sequence {vol.name}", grid=grid)
         label = f"{obj.name} frames {frames[0]}-{frames[-1]}"
-        outs = [f"{base}_{n:04d}.vdb" for n in frames]
     else:
         recipe = make_recipe(settings, field, f"{base}.vdb", settings.loop_frames, grid=grid)
         # The result is drawn in the source's local space: world → the field's coordinates.

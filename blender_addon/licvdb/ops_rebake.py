@@ -117,6 +117,7 @@ class LICVDB_OT_rebake(BakeRunner, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     done_verb = "re-baked"
+    sets_look = False  # the object keeps its look (and material edits)
 
     @classmethod
     def poll(cls, context):

@@ -4,7 +4,7 @@ in Properties > Object Data of a volume."""
 
 import bpy
 
-from . import compat, ops_bake, ops_bake_volume, prefs
+from . import compat, ops_bake, ops_bake_volume, prefs, presets
 
 
 class LICVDB_PT_look(bpy.types.Panel):
@@ -69,29 +69,21 @@ class LICVDB_PT_bake(bpy.types.Panel):
             col.label(text="Set it in Preferences > Add-ons > licvdb")
         if ops_bake.fluid_domain(context.active_object) is None:
             layout.label(text="Select a smoke domain (OpenVDB cache)", icon="INFO")
+        presets.draw_preset_row(layout)
         col = layout.column(align=True)
         col.prop(s, "length")
         col.prop(s, "upsample")
         col.prop(s, "kernel")
+        if s.kernel == "exp":
+            col.prop(s, "decay")
         col.prop(s, "seed")
-        col = layout.column(align=True)
-        col.prop(s, "seed_object")
-        if s.seed_object is not None:
-            col.row().prop(s, "seed_mode", expand=True)
-            col.prop(s, "seed_spacing")
-        row = col.row()
-        row.enabled = s.seed_object is None  # a seed object always bakes spots
-        row.prop(s, "input_type", expand=True)
-        if s.input_type == "spots" or s.seed_object is not None:
-            sub = col.row()
-            sub.enabled = s.seed_object is None
-            sub.prop(s, "spot_spacing")
-            col.prop(s, "spot_radius")
+        draw_input(layout.column(align=True), s)
         col = layout.column(align=True)
         col.prop(s, "color_scalar")
         sub = col.row()
         sub.enabled = s.color_scalar != "NONE"
         sub.prop(s, "colormap")
+        draw_region(layout.column(align=True), s)
         layout.prop(s, "use_frame_range")
         if s.use_frame_range:
             layout.prop(s, "range_from_cache")
@@ -101,12 +93,54 @@ class LICVDB_PT_bake(bpy.types.Panel):
             row.prop(s, "frame_end")
         else:
             layout.prop(s, "loop_frames")
+        draw_new_look(layout.column(align=True), s)
         layout.prop(s, "output_dir")
         layout.prop(s, "threads")
         layout.operator("licvdb.bake_fluid", icon="RENDER_STILL")
         layout.operator("licvdb.bake_file", text="Bake LIC from flow file…", icon="FILEBROWSER")
         if _is_source_volume(context):
             layout.operator("licvdb.bake_volume", icon="VOLUME_DATA")
+
+
+def draw_input(col, s):
+    """The bake settings' input: seed object, noise or spots, spot spacing, radius and halo."""
+    col.prop(s, "seed_object")
+    if s.seed_object is not None:
+        col.row().prop(s, "seed_mode", expand=True)
+        col.prop(s, "seed_spacing")
+    row = col.row()
+    row.enabled = s.seed_object is None  # a seed object always bakes spots
+    row.prop(s, "input_type", expand=True)
+    if s.input_type == "spots" or s.seed_object is not None:
+        sub = col.row()
+        sub.enabled = s.seed_object is None
+        sub.prop(s, "spot_spacing")
+        col.prop(s, "spot_radius")
+        col.prop(s, "halo_scale")
+
+
+def draw_region(col, s):
+    """The bake settings' region of interest."""
+    col.prop(s, "roi_scalar")
+    if s.roi_scalar == "NONE":
+        return
+    col.row(align=True).prop(s, "roi_range")
+    if s.roi_scalar == "speed":
+        col.prop(s, "roi_relative")
+    col.row().prop(s, "roi_mode", expand=True)
+
+
+def draw_new_look(col, s):
+    """The look new bakes get (a re-bake keeps its object's)."""
+    col.prop(s, "look_set", text="Set the look of new bakes")
+    if not s.look_set:
+        return
+    col.row().prop(s, "look", expand=True)
+    col.prop(s, "look_brightness")
+    col.prop(s, "look_absorption")
+    row = col.row()
+    row.enabled = s.look == "HALOS"
+    row.prop(s, "look_halo_strength")
 
 
 def draw_bake_volume(layout, context):

@@ -136,6 +136,7 @@ SCALARS = [("NONE", "None", "Uncoloured"), ("speed", "Speed", ""), ("vorticity",
            ("streamwise-vorticity", "Streamwise vorticity", ""), ("helicity", "Helicity", ""),
            ("q-criterion", "Q criterion", ""), ("density", "Smoke density", "The simulation's density grid"),
            ("temperature", "Temperature", "The simulation's temperature grid")]
+ROI_SCALARS = [i for i in SCALARS if i[0] != "NONE"]
 COLORMAPS = [(n, n, "") for n in ("viridis", "magma", "inferno", "cividis", "heated-object", "red-yellow",
                                   "grey-purple", "coolwarm")]
 
@@ -170,6 +171,24 @@ class LICVDB_BakeSettings(bpy.types.PropertyGroup):
                                           subtype="DISTANCE",
                                           description="Distance between seed points on or in the seed object, in "
                                                       "world units (not output voxels)")
+    decay: bpy.props.FloatProperty(name="Decay", default=0.9, min=0.01, max=0.99,
+                                   description="Oriented kernel: weight ratio of consecutive samples (licvdb's "
+                                               "lic.decay); lower = shorter, more tapered streamlets")
+    halo_scale: bpy.props.FloatProperty(name="Halo scale", default=2.0, min=1.0, soft_max=6.0,
+                                        description="Spots: halo radius / line radius (licvdb's input.halo_scale)")
+    roi_scalar: bpy.props.EnumProperty(
+        name="Region", items=[("NONE", "Everywhere", "No region of interest")] + ROI_SCALARS, default="NONE",
+        description="Region of interest: bake only where this scalar lies in the range (licvdb's roi)")
+    roi_range: bpy.props.FloatVectorProperty(name="Range", size=2, default=(0.5, 1.0), soft_min=0.0,
+                                             description="The scalar's range kept (Low, High)")
+    roi_relative: bpy.props.BoolProperty(
+        name="Fraction of top speed", default=True,
+        description="Speed: the range as fractions of the field's top speed (licvdb info), so it suits any "
+                    "field; off: in the field's units")
+    roi_mode: bpy.props.EnumProperty(
+        name="Mode", items=[("pre", "Seed inside", "Mask the input: lines start inside and leave along the flow"),
+                            ("post", "Cut", "Mask the output: the texture stops at the region's edge")],
+        default="pre")
     color_scalar: bpy.props.EnumProperty(name="Colour by", items=SCALARS, default="speed")
     colormap: bpy.props.EnumProperty(name="Colormap", items=COLORMAPS, default="viridis")
     loop_frames: bpy.props.IntProperty(name="Loop frames", default=1, min=1, max=1000,
@@ -187,6 +206,38 @@ class LICVDB_BakeSettings(bpy.types.PropertyGroup):
                                          description="Where bakes go; empty = a licvdb folder in the fluid cache "
                                                      "(or beside the flow file)")
     threads: bpy.props.IntProperty(name="Threads", default=0, min=0, max=1024, description="0 = all cores")
+
+    # The look a new bake gets (presets set it; a re-bake keeps its object's look instead).
+    look_set: bpy.props.BoolProperty(name="Set look", default=False,
+                                     description="Give new bakes this look; off: the import's choice (halos when the "
+                                                 "bake has them, dense values for noise)")
+    look: bpy.props.EnumProperty(name="Look", items=LOOKS, default="HALOS")
+    look_brightness: bpy.props.FloatProperty(name="Line brightness", default=1.0, min=0.0, soft_max=20.0)
+    look_absorption: bpy.props.FloatProperty(name="Line absorption", default=0.3, min=0.0, soft_max=5.0)
+    look_halo_strength: bpy.props.FloatProperty(name="Halo strength", default=1.5, min=0.0, soft_max=10.0)
+
+
+#: The look settings of new bakes (scene.licvdb_bake.look_*) → the object's look settings.
+SCENE_LOOK = (("look", "look"), ("look_brightness", "brightness"), ("look_absorption", "line_absorption"),
+              ("look_halo_strength", "halo_strength"))
+
+
+def apply_scene_look(obj, look: dict | None):
+    """Give the bake ``obj`` the look ``look`` (scene_look's dict; None: leave the import's)."""
+    if not look:
+        return
+    s = obj.licvdb
+    with rebuild_suspended():
+        for name, value in look.items():
+            setattr(s, name, value)
+    apply_look(obj)
+
+
+def scene_look(settings) -> dict | None:
+    """{object look setting: value} for new bakes, or None when the settings leave the look alone."""
+    if not settings.look_set:
+        return None
+    return {obj_name: getattr(settings, name) for name, obj_name in SCENE_LOOK}
 
 
 classes = (LICVDB_ObjectSettings, LICVDB_BakeSettings)

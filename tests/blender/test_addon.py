@@ -2,6 +2,7 @@
 
 import os
 import tomllib
+import types
 
 import addon_utils
 import bpy
@@ -93,6 +94,11 @@ class RecordingLayout:
         module, op = idname.split(".")
         assert hasattr(getattr(bpy.ops, module), op), idname
         self.log.append(("operator", idname))
+        return types.SimpleNamespace()  # (the operator's properties, which a panel may set)
+
+    def menu(self, idname, **kw):
+        assert hasattr(bpy.types, idname), f"panel shows unregistered menu {idname!r}"
+        self.log.append(("menu", idname))
 
     def label(self, text="", **kw):
         self.log.append(("label", text))

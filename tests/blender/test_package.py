@@ -108,7 +108,13 @@ def zips(tmp_path_factory):
 
 
 def package_files():
-    return sorted(f for f in os.listdir(PKG) if f.endswith((".py", ".toml")))
+    """The package's files relative to it (the shipped bake presets in presets/bake/ too), sorted."""
+    out = []
+    for base, dirs, names in os.walk(PKG):
+        dirs[:] = [d for d in dirs if d != "__pycache__"]
+        out += [os.path.relpath(os.path.join(base, f), PKG).replace(os.sep, "/") for f in names
+                if f.endswith((".py", ".toml"))]
+    return sorted(out)
 
 
 def test_extension_zip_has_the_package_at_its_root(zips):
@@ -121,6 +127,9 @@ def test_extension_zip_has_the_package_at_its_root(zips):
 def test_legacy_zip_has_the_package_folder(zips):
     names = zipfile.ZipFile(zips["legacy"]).namelist()
     assert sorted(names) == ["licvdb/" + f for f in package_files()]
+    # The shipped bake presets (presets.py reads them in place) are in both zips.
+    shipped = sorted(n for n in names if n.startswith("licvdb/presets/bake/") and n.endswith(".py"))
+    assert len(shipped) >= 4 and "licvdb/presets/bake/Comet_loop.py" in shipped, shipped
 
 
 def test_extension_manifest_is_valid(zips):
