@@ -107,3 +107,63 @@ def test_bake_operators_share_the_runner():
     for op in (ops_bake.LICVDB_OT_bake_fluid, ops_bake_file.LICVDB_OT_bake_file):
         assert issubclass(op, ops_bake.BakeRunner)
         assert "modal" not in vars(op) and "_complete" not in vars(op)
+
+
+def numbered_sequence(tmp_path, name="flow_####.vdb", frames="1,3"):
+    """A 3-file numbered sequence of a moving 16³ tornado (licvdb field --frames), small settings."""
+    d = tmp_path / "seq"
+    d.mkdir()
+    run_licvdb("field", "tornado", "--res", "16,16,16", "--frames", frames, "--out", d / name, "--quiet")
+    s = bpy.context.scene.licvdb_bake
+    s.length, s.upsample, s.color_scalar = 4.0, 1, "NONE"
+    return d
+
+
+def test_file_sequence_found_from_any_of_its_files(tmp_path):
+    d = numbered_sequence(tmp_path, "fluid_data_####.vdb", "10,12")
+    (d / "fluid_data_0014.vdb").write_bytes((d / "fluid_data_0010.vdb").read_bytes())  # (not next to the run)
+    (d / "fluid_data_011.vdb").write_bytes(b"")  # (other digit count: not a sibling)
+    pattern = str(d / "fluid_data_####.vdb")
+    for n in (10, 11, 12):
+        assert ops_bake_file.file_sequence(str(d / f"fluid_data_{n:04d}.vdb")) == (pattern, [10, 11, 12])
+    assert ops_bake_file.file_sequence(str(d / "fluid_data_0014.vdb")) is None  # alone
+    assert ops_bake_file.file_sequence(str(tmp_path / "flow.vdb")) is None  # no number
+    with pytest.raises(ops_bake.BakeError, match="lacks frame 13"):
+        ops_bake_file.file_sequence(pattern)  # a pattern (a re-bake's source): every file, consecutive
+    (d / "fluid_data_0014.vdb").unlink()
+    assert ops_bake_file.file_sequence(pattern) == (pattern, [10, 11, 12])
+
+
+def test_bake_file_of_a_sequence_bakes_it_unsteady_on_its_frame_numbers(tmp_path):
+    """fluid_data_0010 … 0012: one unsteady sequence, file n's bake shown at scene frame n."""
+    d = numbered_sequence(tmp_path, "fluid_data_####.vdb", "10,12")
+    obj = bake(d / "fluid_data_0011.vdb")  # any file of it; Sequence is on by default
+    vol = obj.data
+    assert vol.is_sequence and vol.sequence_mode == "CLIP"
+    assert (vol.frame_start, vol.frame_duration, vol.frame_offset) == (10, 3, 9)
+    man = mf.read_manifest(obj.licvdb.manifest)
+    assert man.unsteady and man.frames == 3
+    assert man.recipe["field"]["path"] == str(d / "fluid_data_####.vdb") and man.recipe["field"]["frames"] == [10, 12]
+    base = bpy.path.abspath(vol.filepath)[:-len("_0010.vdb")]
+    assert os.path.dirname(base) == str(d / "licvdb") and os.path.basename(base).startswith("fluid_data_lic_")
+    for f in (10, 11, 12):
+        bpy.context.scene.frame_set(f)
+        grids = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data.grids
+        assert grids.frame_filepath == f"{base}_{f:04d}.vdb", (f, grids.frame_filepath)
+    assert obj.licvdb.source_kind == "FILE" and obj.licvdb.source_path == str(d / "fluid_data_####.vdb")
+    # A re-bake bakes the sequence again (its source is the pattern) into the same object.
+    assert bpy.ops.licvdb.rebake() == {"FINISHED"}
+    assert bpy.path.abspath(obj.data.filepath) != f"{base}_0010.vdb"
+    assert (obj.data.frame_start, obj.data.frame_duration, obj.data.frame_offset) == (10, 3, 9)
+
+
+def test_bake_file_sequence_off_or_a_loop(tmp_path):
+    d = numbered_sequence(tmp_path)
+    obj = bake(d / "flow_0002.vdb", sequence=False)  # this file alone
+    assert not obj.data.is_sequence
+    assert mf.read_manifest(obj.licvdb.manifest).recipe["field"]["path"] == str(d / "flow_0002.vdb")
+    bpy.context.scene.licvdb_bake.loop_frames = 3
+    with pytest.raises(RuntimeError, match="numbered sequence of 3 files.*set Loop frames to 1, or turn off Sequence"):
+        bpy.ops.licvdb.bake_file(filepath=str(d / "flow_0001.vdb"))
+    loop = bake(d / "flow_0001.vdb", sequence=False)
+    assert loop.data.is_sequence and loop.data.sequence_mode == "REPEAT"
