@@ -16,13 +16,14 @@ from conftest import run_licvdb
 from bake_util import small_field
 from test_bake_file import bake
 
-SHIPPED = {
-    "Streamlines with halos by speed": dict(input_type="spots", kernel="box", roi_scalar="NONE", loop_frames=1,
-                                            color_scalar="speed", look_set=True, look="HALOS"),
+SHIPPED = {  # lines seeded where the flow is faster than a quarter of its top speed (any field)
+    "Streamlines with halos by speed": dict(input_type="spots", kernel="box", roi_scalar="speed", roi_mode="pre",
+                                            roi_relative=True, loop_frames=1, color_scalar="speed", look_set=True,
+                                            look="HALOS"),
     "Dense LIC in a region": dict(input_type="noise", roi_scalar="speed", roi_relative=True, roi_mode="post",
                                   loop_frames=1, look_set=True, look="LINES"),
-    "Comet loop": dict(input_type="spots", kernel="box", loop_frames=24, roi_scalar="NONE", look="HALOS"),
-    "Tapered exp loop": dict(input_type="spots", kernel="exp", loop_frames=24, roi_scalar="NONE", look="LINES"),
+    "Comet loop": dict(input_type="spots", kernel="box", loop_frames=24, roi_scalar="speed", look="HALOS"),
+    "Tapered exp loop": dict(input_type="spots", kernel="exp", loop_frames=24, roi_scalar="speed", look="LINES"),
 }
 
 

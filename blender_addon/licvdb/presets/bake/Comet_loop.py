@@ -1,18 +1,18 @@
-# licvdb bake preset: A seamless 24-frame loop: spots travel downstream as comets (box kernel), in halos, coloured by speed.
+# licvdb bake preset: A seamless 24-frame loop: spots travel downstream as comets (box kernel), in halos, seeded where the flow is faster than a quarter of its top speed, coloured by speed.
 import bpy
 s = bpy.context.scene.licvdb_bake
 
-s.length = 16.0
+s.length = 20.0
 s.upsample = 2
 s.kernel = 'box'
 s.decay = 0.9
 s.seed = 1
 s.input_type = 'spots'
-s.spot_spacing = 10.0
+s.spot_spacing = 14.0
 s.spot_radius = 1.0
 s.halo_scale = 2.0
-s.roi_scalar = 'NONE'
-s.roi_range = (0.5, 1.0)
+s.roi_scalar = 'speed'
+s.roi_range = (0.25, 1.0)
 s.roi_relative = True
 s.roi_mode = 'pre'
 s.color_scalar = 'speed'
