@@ -167,3 +167,26 @@ def test_bake_file_sequence_off_or_a_loop(tmp_path):
         bpy.ops.licvdb.bake_file(filepath=str(d / "flow_0001.vdb"))
     loop = bake(d / "flow_0001.vdb", sequence=False)
     assert loop.data.is_sequence and loop.data.sequence_mode == "REPEAT"
+
+
+def test_file_browser_sidebar_offers_sequence_presets_and_settings(tmp_path):
+    """What the operator draws beside the file browser (background mode draws no UI: a recording
+    layout checks that every property shown exists)."""
+    from test_addon import RecordingLayout
+    d = numbered_sequence(tmp_path)
+    op = ops_bake_file.LICVDB_OT_bake_file
+    log = []
+
+    class Fake:
+        bl_rna = bpy.ops.licvdb.bake_file.get_rna_type()
+        layout = RecordingLayout(log)
+        grid, sequence = "", True
+        draw_sequence = op.draw_sequence
+
+    fake = Fake()
+    for path, offered in ((d / "flow_0002.vdb", True), (tmp_path / "lone.vdb", False)):
+        log.clear()
+        fake.filepath = str(path)
+        op.draw(fake, bpy.context)
+        assert (("prop", "sequence") in log) == offered, log
+        assert ("menu", "LICVDB_MT_bake_presets") in log and ("prop", "roi_scalar") in log
