@@ -40,6 +40,8 @@ def parse_args():
     p.add_argument("--size", type=int, default=380, help="each shot's height and width in pixels [380]")
     p.add_argument("--view", default="-0.55,-1.0,0.35",
                    help="direction from the bake's centre to the eye, x,y,z [-0.55,-1,0.35]")
+    p.add_argument("--coarsen", type=float, default=0.0,
+                   help="mesh at this many output voxels (Volume to Mesh voxel size) instead of the bake's grid")
     args = p.parse_args(argv)
     args.shots = [s for s in args.shots.split(",") if s]
     bad = [s for s in args.shots if s not in SHOTS]
@@ -127,6 +129,10 @@ class Shooter:
 
         obj = ops_import.import_bake(bpy.context, os.path.abspath(self.args.bake), surface_preview=True)
         self.obj = obj
+        if self.args.coarsen > 0:
+            mod = preview.preview_of(obj).modifiers[preview.MODIFIER]
+            mod.resolution_mode = "VOXEL_SIZE"
+            mod.voxel_size = self.args.coarsen * obj.licvdb.voxel_size
         t = time.time()
         tris = preview.triangle_count(bpy.context, obj)
         print(f"viewport_screenshot: preview of {obj.name}: {tris} triangles, "
