@@ -101,7 +101,8 @@ def swap_bake(context, old, new) -> bool:
     if rebuild:
         props.apply_look(old)
     for o in context.view_layer.objects:
-        o.select_set(False)
+        if o is not None:  # (4.x+: the removed object's base may linger until the view layer resyncs)
+            o.select_set(False)
     if old.name in context.view_layer.objects:
         old.select_set(True)
         context.view_layer.objects.active = old

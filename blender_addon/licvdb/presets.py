@@ -69,8 +69,10 @@ class LICVDB_OT_bake_preset_add(AddPresetBase, bpy.types.Operator):
     bl_label = "Add bake preset"
     preset_menu = "LICVDB_MT_bake_presets"
     preset_subdir = PRESET_SUBDIR
-    preset_defines = ["s = bpy.context.scene.licvdb_bake"]
-    preset_values = [f"s.{name}" for name in PRESET_SETTINGS]
+    # Full paths, no preset_defines: AddPresetBase exec()s the defines and eval()s the values in
+    # its own function, and from Python 3.13 (Blender 4.3+) an exec() no longer adds names that a
+    # later eval() in the same function sees (PEP 667).
+    preset_values = [f"bpy.context.scene.licvdb_bake.{name}" for name in PRESET_SETTINGS]
 
     def execute(self, context):
         if not (self.remove_active or self.remove_name):
