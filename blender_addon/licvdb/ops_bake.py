@@ -234,7 +234,8 @@ class BakeJob:
 
     @property
     def fraction(self) -> float:
-        """Overall progress in [0, 1]: finished tasks plus the running task's stage fraction."""
+        """Overall progress in [0, 1]: finished tasks plus the running task's fraction (one rising
+        fraction from licvdb's per-stage ones: progress.task_fraction)."""
         self._read_progress()
         running = progress.task_fraction(self.stage, self.stage_fraction) if self.stage else 0.0
         return min(1.0, (len(self.done_outputs) + running) / max(1, len(self.tasks)))
