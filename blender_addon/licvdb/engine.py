@@ -214,3 +214,17 @@ def find_engine(package_dir: str | None = None, user_dir: str | None = None):
         return _runnable(engine_dir, user_dir)
     except (OSError, EngineError) as e:
         return None, f"the bundled engine in {engine_dir} cannot be made runnable: {e}"
+
+
+def missing_module_hint(message: str) -> str:
+    """What to do when licvdb's ``message`` says one of its modules (mesh: VTK's CFD readers;
+    image: OIIO/OCIO) is missing: the extension's own engine is built without them."""
+    for module, what, instead in (
+            ("mesh module", "CFD meshes (.vtu, .vtk, OpenFOAM, PLOT3D …) need",
+             ", or convert the mesh to a .vdb with `licvdb convert` where the full licvdb is installed"),
+            ("image module", "images need", "")):
+        if module in message and "is missing" in message:
+            return (f"the licvdb engine in use has no {module}, which {what}: install the full licvdb bundle "
+                    f"(licvdb-VERSION-linux-x86_64.tar.xz) and choose its bin/licvdb in the add-on's "
+                    f"preferences{instead}")
+    return ""

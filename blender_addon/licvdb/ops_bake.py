@@ -322,8 +322,8 @@ class BakeJob:
             lines = err.splitlines()
             errors = [l for l in lines if "error" in l.lower()]
             last = " ".join(errors or lines[-1:]) or f"exit code {self.proc.returncode}"
-            hint = ("check the bake settings" if self.proc.returncode == 2 else
-                    "see the system console for details")
+            hint = engine.missing_module_hint(last) or (
+                "check the bake settings" if self.proc.returncode == 2 else "see the system console for details")
             self.error = f"licvdb bake failed for {label}: {last} ({hint})"
             self._remove_outputs()
             return True

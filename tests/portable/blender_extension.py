@@ -127,6 +127,25 @@ def bake_file(run):
     assert "density" in {g.name for g in vol.grids}, [g.name for g in vol.grids]
 
 
+@check("mesh-needs-the-full-engine")
+def mesh_needs_the_full_engine(run):
+    # The extension's engine has no mesh module: a .vtu is refused with what to install instead.
+    vtu = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                       "tests", "fuzz", "corpus", "vtu", "hex.vtu")
+    assert os.path.isfile(vtu), vtu
+    bpy.context.scene.licvdb_bake.output_dir = run.args.out  # (/src is read-only)
+    before = set(bpy.data.objects)
+    try:
+        bpy.ops.licvdb.bake_file(filepath=vtu)
+    except RuntimeError as e:
+        message = str(e)
+    else:
+        raise AssertionError("the extension's engine baked a .vtu: it should have no mesh module")
+    print(f"  refused: {message.strip()}")
+    assert "mesh module" in message and "full licvdb bundle" in message, message
+    assert not new_objects(before), "something was added"
+
+
 class Run:
     def __init__(self, args, addon):
         self.args, self.addon = args, addon
