@@ -167,3 +167,18 @@ def test_import_operator_option(spots):
 def test_sub_panel_is_registered_under_the_look_panel():
     cls = bpy.types.Panel.bl_rna_get_subclass_py("LICVDB_PT_preview")
     assert cls is not None and cls.bl_parent_id == "LICVDB_PT_look"
+
+
+def test_rebake_swap_keeps_one_preview(spots):
+    """A re-bake imports the new bake (with its own preview in the UI) and swaps it into the old
+    object: the old object's preview stays and reads the new files; the new one's goes."""
+    from licvdb import ops_rebake
+
+    old = ops_import.import_bake(bpy.context, str(spots), surface_preview=True)
+    meshes = len(bpy.data.meshes)
+    new = ops_import.import_bake(bpy.context, str(spots), surface_preview=True)
+    assert len(bpy.data.meshes) == meshes + 1
+    ops_rebake.swap_bake(bpy.context, old, new)
+    assert len(bpy.data.meshes) == meshes
+    assert [o for o in bpy.data.objects if preview.MARK in o.keys()] == [preview.preview_of(old)]
+    assert len(evaluated_vertices(preview.preview_of(old))) > 0
