@@ -5,7 +5,7 @@
 // 19 cases for .vdb fields; the cases here are new or exercise the new readers.)
 #include "InputsHarness.h"
 
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/AtomicWrite.h"
 
 #include <lic/field/Presets.h>
 

@@ -6,7 +6,8 @@
 
 #include "CliRun.h"
 #include "vdbexport/io/Info.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/AtomicWrite.h"
+#include "vdbexport/io/FieldGrids.h"
 
 #include <nlohmann/json.hpp>
 #include <openvdb/io/File.h>

@@ -9,7 +9,8 @@
 
 #include "vdbexport/io/FieldInput.h"
 #include "vdbexport/io/MeshInput.h"
-#include "vdbexport/io/VdbIO.h"
+
+#include <nlohmann/json.hpp>
 
 #include <lic/util/Error.h>
 

@@ -13,7 +13,8 @@
 
 #include "CliRun.h"
 #include "../unit/ManifestDigests.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/AtomicWrite.h"
+#include "vdbexport/io/VdbCheck.h"
 
 #include "lic/field/Presets.h"
 

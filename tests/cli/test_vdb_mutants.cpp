@@ -10,7 +10,7 @@
 #include "../unit/VdbSamples.h"
 
 #include "vdbexport/io/Sha256.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/VdbCheck.h"
 
 #include <nlohmann/json.hpp>
 

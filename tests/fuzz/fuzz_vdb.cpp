@@ -6,7 +6,8 @@
 // Any exception other than lic::InputError, any crash, sanitizer report, allocation over the
 // -malloc_limit_mb (default: -rss_limit_mb) or time-out is a finding.
 #include "vdbexport/io/Info.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/FieldGrids.h"
+#include "vdbexport/io/ReadCheck.h"
 
 #include <lic/util/Error.h>
 

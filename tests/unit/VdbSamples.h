@@ -7,7 +7,7 @@
 
 #include <lic/field/Presets.h>
 
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/AtomicWrite.h"
 
 #include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>

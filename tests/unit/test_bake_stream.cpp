@@ -2,7 +2,7 @@
 // 1, 2, 3 and 4 threads in every grid and every loop frame; halo ≥ density on every voxel of a
 // bake; a loop traces the same streamlines as a still; streamed percentiles are exact.
 #include "vdbexport/bake/Bake.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/AtomicWrite.h"
 
 #include "lic/field/ScalarField.h"
 

@@ -5,7 +5,7 @@
 // one-process Job (every collective a no-op, exceptions unchanged). The MPI runs themselves are
 // in tests/cli/test_mpi.cpp.
 #include "vdbexport/bake/Recipe.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/AtomicWrite.h"
 
 #include "bake/Distribute.h"
 #include "bake/FieldShare.h"

@@ -2,7 +2,7 @@
 // enclose their lines, width series chosen by a scalar, surface-of-interest seeding, sparse output,
 // and thread determinism. Fields are small (tabbed-jet at 40×40×60) so the suite runs in seconds.
 #include "vdbexport/bake/Bake.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/AtomicWrite.h"
 
 #include "lic/util/Error.h"
 #include "lic/field/Presets.h"

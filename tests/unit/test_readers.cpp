@@ -3,7 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "vdbexport/io/FieldInput.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/AtomicWrite.h"
 
 #include <lic/util/Error.h>
 

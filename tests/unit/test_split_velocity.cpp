@@ -4,7 +4,7 @@
 // different voxel sizes are refused; a missing component is named.
 #include "vdbexport/bake/Bake.h"
 #include "vdbexport/io/FieldInput.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/AtomicWrite.h"
 
 #include "lic/util/Error.h"
 

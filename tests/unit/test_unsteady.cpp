@@ -7,7 +7,7 @@
 #include "vdbexport/bake/Bake.h"
 #include "vdbexport/io/FieldSequence.h"
 #include "vdbexport/io/OutputNames.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/AtomicWrite.h"
 
 #include "lic/util/Error.h"
 #include "lic/field/Presets.h"

@@ -11,7 +11,9 @@
 #include "vdbexport/io/Info.h"
 #include "vdbexport/io/Sha256.h"
 #include "vdbexport/io/VdbCheck.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/FieldGrids.h"
+#include "vdbexport/io/ReadCheck.h"
+#include "vdbexport/io/VdbReader.h"
 
 #include <lic/util/Error.h>
 

@@ -3,7 +3,10 @@
 #include <gtest/gtest.h>
 
 #include "vdbexport/io/Info.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/AtomicWrite.h"
+#include "vdbexport/io/FieldGrids.h"
+#include "vdbexport/io/VdbReader.h"
+#include "vdbexport/io/VdbWrite.h"
 #include "vdbexport/io/SealedLeaves.h"
 #include "io/VdbGridReader.h"
 

@@ -7,7 +7,7 @@
 #include "vdbexport/io/FieldSequence.h"
 #include "vdbexport/io/MeshInput.h"
 #include "vdbexport/io/Numbers.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/OutputSet.h"
 
 #include <lic/util/Error.h>
 

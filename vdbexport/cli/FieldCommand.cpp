@@ -3,7 +3,9 @@
 
 #include "vdbexport/io/FieldSequence.h"
 #include "vdbexport/io/Numbers.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/OutputSet.h"
+
+#include <nlohmann/json.hpp>
 
 #include <lic/field/Presets.h>
 #include <lic/util/Error.h>

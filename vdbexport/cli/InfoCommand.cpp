@@ -3,7 +3,7 @@
 
 #include "vdbexport/io/Info.h"
 #include "vdbexport/io/VdbCheck.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/ReadCheck.h"
 
 #include <lic/util/Error.h>
 

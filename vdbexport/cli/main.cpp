@@ -10,7 +10,7 @@
 #include "vdbexport/bake/Distributed.h"
 #include "vdbexport/io/Program.h"
 #include "vdbexport/io/VdbCheck.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/ReadCheck.h"
 
 #include <lic/util/Error.h>
 #include <lic/util/Parallel.h>

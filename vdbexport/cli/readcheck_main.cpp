@@ -7,7 +7,7 @@
 // only (20 shared libraries; licvdb links 27, MPI among them, and loads OpenImageIO and VTK only
 // when it needs them), so it starts sooner than `licvdb`.
 // Exit 0: intact; 2: refused, with "licvdb-readcheck: error: REASON" on stderr; 1: another failure.
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/ReadCheck.h"
 
 #include <cstring>
 #include <iostream>

@@ -2,6 +2,7 @@
 // manifest. In a distributed bake (mpirun) every rank bakes its share of the bricks and rank 0
 // gathers the leaves and writes (bake/Distribute.h); in one process every Job call is a no-op.
 #include "vdbexport/bake/Bake.h"
+#include "vdbexport/bake/Outputs.h"
 
 #include "bake/Distribute.h"
 #include "bake/Frame.h"

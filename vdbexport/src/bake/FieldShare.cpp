@@ -4,7 +4,9 @@
 #include "lic/field/ScalarField.h"
 
 #include "io/DenseCommon.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/FieldGrids.h"
+#include "vdbexport/io/ReadCheck.h"
+#include "vdbexport/io/VdbReader.h"
 
 #include "lic/engine/Engine.h"
 #include "lic/util/Error.h"

@@ -10,6 +10,8 @@ namespace vdbexport {
 
 namespace fs = std::filesystem;
 
+bool isSequenceBake(const Recipe& recipe) { return recipe.field.frames.has_value() || isFramePattern(recipe.field.path); }
+
 std::vector<std::string> bakeOutputs(const Recipe& recipe)
 {
     std::vector<std::string> outputs{manifestPath(recipe.output.path)};

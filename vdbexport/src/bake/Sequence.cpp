@@ -12,7 +12,7 @@
 #include "vdbexport/io/FieldSequence.h"
 #include "vdbexport/io/OutputNames.h"
 #include "vdbexport/io/SealedLeaves.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/OutputSet.h"
 
 #include "lic/engine/Engine.h"
 #include "lic/field/Region.h"

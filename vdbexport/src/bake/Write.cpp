@@ -3,7 +3,7 @@
 #include "vdbexport/io/Sha256.h"
 
 #include "vdbexport/io/OutputNames.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/OutputSet.h"
 
 #include "lic/composite/Colormap.h"
 

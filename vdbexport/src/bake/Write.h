@@ -10,7 +10,7 @@
 #include "lic/composite/Compositor.h"
 
 #include "lic/util/Progress.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/OutputSet.h"
 
 #include <nlohmann/json.hpp>
 

@@ -1,7 +1,7 @@
 // loadField(): the single entry point that reads a bake's field in any supported format.
 #include "vdbexport/io/FieldInput.h"
 #include "vdbexport/io/MeshInput.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/FieldGrids.h"
 
 #include "io/DenseCommon.h"
 

@@ -77,8 +77,6 @@ std::string expandFramePattern(const std::string& pattern, int frame)
     return pattern.substr(0, ph.pos) + padded(frame, ph.width) + pattern.substr(ph.pos + ph.len);
 }
 
-bool isSequenceBake(const Recipe& recipe) { return recipe.field.frames.has_value() || isFramePattern(recipe.field.path); }
-
 FieldFrames resolveFieldFrames(const FieldSpec& field)
 {
     const Placeholder ph = onePlaceholder(field.path);

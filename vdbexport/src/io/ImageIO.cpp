@@ -3,7 +3,7 @@
 #include "vdbexport/io/ImageIO.h"
 
 #include "vdbexport/io/Program.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/AtomicWrite.h"
 
 #include "ImageModuleApi.h"
 #include "Quote.h"

@@ -1,6 +1,6 @@
 #include "vdbexport/io/Info.h"
 
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/VdbReader.h"
 
 #include <openvdb/openvdb.h>
 

@@ -14,7 +14,7 @@
 // written by OpenVDB itself. The bytes are io::File::write's but for the file's random UUID
 // (tests/unit/test_vdbio.cpp compares them); the record layout followed here is the same in
 // OpenVDB 10 to 13.
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/VdbWrite.h"
 #include "vdbexport/io/SealedLeaves.h"
 
 #include <lic/util/Error.h>

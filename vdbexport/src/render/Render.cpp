@@ -3,7 +3,8 @@
 #include "io/Quote.h"
 
 #include "vdbexport/io/Numbers.h"
-#include "vdbexport/io/VdbIO.h"
+#include "vdbexport/io/FieldGrids.h"
+#include "vdbexport/io/VdbReader.h"
 
 #include <lic/composite/Colormap.h>
 #include <lic/util/Error.h>

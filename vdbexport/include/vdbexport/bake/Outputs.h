@@ -9,6 +9,9 @@
 
 namespace vdbexport {
 
+/// True if the recipe bakes an unsteady sequence (field.frames, or a pattern path).
+bool isSequenceBake(const Recipe& recipe);
+
 /// Every file the bake of `recipe` writes: its frames (one still, a loop's, or an unsteady
 /// sequence's when the field's frames can be resolved) and its manifest.
 std::vector<std::string> bakeOutputs(const Recipe& recipe);

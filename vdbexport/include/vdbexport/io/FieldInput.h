@@ -7,7 +7,7 @@
 // whose voxel (i,j,k) has its centre at world position origin + (i,j,k)·voxel_size.
 #pragma once
 
-#include "vdbexport/bake/Recipe.h"
+#include "vdbexport/io/FieldSpec.h"
 
 #include <lic/util/Progress.h>
 

@@ -2,7 +2,7 @@
 // (`cache/data/fluid_data_####.vdb`, `vel.%04d.vdb`), a frame range, and the files it names.
 #pragma once
 
-#include "vdbexport/bake/Recipe.h"
+#include "vdbexport/io/FieldSpec.h"
 
 #include <string>
 #include <vector>
@@ -29,8 +29,5 @@ struct FieldFrames
 /// @throw lic::InputError for frames without a pattern, a pattern without frames on disk, missing
 ///        frames (naming the first and how many), or a range that is not contiguous on disk.
 FieldFrames resolveFieldFrames(const FieldSpec& field);
-
-/// True if the recipe bakes an unsteady sequence (field.frames, or a pattern path).
-bool isSequenceBake(const Recipe& recipe);
 
 } // namespace vdbexport
