@@ -5,7 +5,7 @@
 //
 // VTK 9.1's XML reader itself dereferences null on some malformed files (this target found one in
 // 14 runs: a bad ASCII number in a cell array). licvdb reads meshes in a child process first for
-// that reason (MeshModule.cpp readInChildFirst), so here too each input is first parsed by VTK in a
+// that reason (MeshInput.cpp readInChildFirst), so here too each input is first parsed by VTK in a
 // forked child: a child killed by a signal or a time limit is what licvdb refuses as a corrupt
 // file, and only inputs VTK survives go on, in this process, through the whole path (whose
 // coverage guides the fuzzer).

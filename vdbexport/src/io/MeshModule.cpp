@@ -1,7 +1,7 @@
 // CFD meshes through VTK: its readers parse the files, vtkResampleToImage (VTK's probe) samples
 // them on the VDB lattice, and this file turns the samples inside the mesh into grids. Built as
 // licvdb's mesh module, licvdb-mesh.so (MeshModuleApi.h), which licvdb loads on first use; the
-// functions of MeshInput.h (MeshModule.cpp) read the mesh in a child process first, then call these.
+// functions of MeshInput.h (MeshInput.cpp) read the mesh in a child process first, then call these.
 #include "MeshModuleApi.h"
 
 #include "io/DenseCommon.h"

@@ -1,5 +1,5 @@
-// The mesh module's interface: what licvdb-mesh.so (MeshInput.cpp: VTK's readers and probe) gives
-// the loader in MeshModule.cpp, which implements MeshInput.h. VTK's 39 shared libraries cost every
+// The mesh module's interface: what licvdb-mesh.so (MeshModule.cpp: VTK's readers and probe) gives
+// the loader in MeshInput.cpp, which implements MeshInput.h. VTK's 39 shared libraries cost every
 // licvdb start ~0.05 s of relocations; only mesh input needs them, so they are loaded on first
 // use (Module.h).
 #pragma once
@@ -32,7 +32,7 @@ struct Api
     std::string (*describeFormat)(const std::string& format);
 };
 
-// The module's own functions (MeshInput.cpp), behind the table; the fuzz target calls them directly.
+// The module's own functions (MeshModule.cpp), behind the table; the fuzz target calls them directly.
 std::vector<double> meshTimes(const std::string& path, const std::string& format);
 MeshSummary describeMesh(const std::string& path, const std::string& format, const MeshOptions& options);
 LoadedField loadMesh(const std::string& path, const std::string& format, const MeshOptions& options,
