@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 
 #include "CliRun.h"
+#include "../unit/TempDirSuite.h"
 #include "vdbexport/io/Sha256.h"
 
 #include <OpenImageIO/imageio.h>
@@ -122,15 +123,12 @@ std::string pixelDigest(const fs::path& path)
     return h.hex();
 }
 
-class Golden : public ::testing::Test
+class Golden : public lictest::TempDirSuite<Golden>
 {
 protected:
     static void SetUpTestSuite()
     {
-        openvdb::initialize();
-        sDir = fs::temp_directory_path() / ("licvdb_golden_" + std::to_string(::getpid()));
-        fs::remove_all(sDir);
-        fs::create_directories(sDir / "logs");
+        makeSuiteDir("golden", "logs");
         must({"field", "abc", "--res", "16,16,16", "--out", "abc.vdb", "--quiet"});
         must({"field", "tabbed-jet", "--res", "20,20,28", "--out", "jet.vdb", "--quiet"});
         must({"field", "uniform", "--res", "16,12,12", "--out", "uniform.vdb", "--quiet"});
@@ -144,7 +142,7 @@ protected:
             std::ofstream(kGoldenFile) << sRecorded.dump(2) << "\n";
             std::cerr << "recorded the golden digests in " << kGoldenFile << "\n";
         }
-        fs::remove_all(sDir);
+        TempDirSuite::TearDownTestSuite();
     }
 
     static RunResult run(const std::vector<std::string>& args) { return cli_test::runLicvdb(sDir, sDir / "logs", args); }
@@ -180,11 +178,9 @@ protected:
         }
     }
 
-    static fs::path sDir;
     static json sGolden, sRecorded;
 };
 
-fs::path Golden::sDir;
 json Golden::sGolden, Golden::sRecorded = json::object();
 
 TEST_F(Golden, NoiseWithColourInputAndTangent)

@@ -13,6 +13,7 @@
 
 #include "CliRun.h"
 #include "../unit/ManifestDigests.h"
+#include "../unit/TempDirSuite.h"
 #include "vdbexport/io/AtomicWrite.h"
 #include "vdbexport/io/VdbCheck.h"
 
@@ -38,41 +39,29 @@ using cli_test::RunResult;
 
 namespace {
 
-class MpiBake : public ::testing::Test
+class MpiBake : public lictest::TempDirSuite<MpiBake>
 {
 protected:
     static void SetUpTestSuite()
     {
-        openvdb::initialize();
-        sDir = fs::temp_directory_path() / ("licvdb_mpi_" + std::to_string(::getpid()));
-        fs::create_directories(sDir / "logs");
-        const lic::PresetField jet = lic::makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36));
-        openvdb::GridPtrVec grids{jet.velocity};
-        for (const auto& s : jet.scalars) grids.push_back(s);
-        vdbexport::writeVdbAtomic((sDir / "jet.vdb").string(), grids);
+        makeSuiteDir("mpi", "logs");
+        const lic::PresetField jet = lictest::writePresetField(sDir / "jet.vdb", "tabbed-jet", openvdb::Coord(24, 24, 36));
         // The same field with one NaN in a corner: only the ranks whose part holds it see it.
         auto nan = openvdb::gridPtrCast<openvdb::Vec3SGrid>(jet.velocity->deepCopyGrid());
         nan->tree().setValueOn(nan->evalActiveVoxelBoundingBox().max(), openvdb::Vec3s(std::nanf(""), 0.0f, 0.0f));
         vdbexport::writeVdbAtomic((sDir / "nan.vdb").string(), {nan});
         // A long field, so that a rank's part (its bricks ± the margin) is less than the whole.
-        const lic::PresetField abc = lic::makePresetField("abc", openvdb::Coord(16, 16, 96));
-        vdbexport::writeVdbAtomic((sDir / "long.vdb").string(), {abc.velocity});
+        const lic::PresetField abc =
+            lictest::writePresetField(sDir / "long.vdb", "abc", openvdb::Coord(16, 16, 96), lictest::PresetGrids::Velocity);
         // A moving field: 8 frames of the tornado (frame n at time n/24).
-        for (int n = 1; n <= 8; ++n) {
-            const lic::PresetField t = lic::makePresetField("tornado", openvdb::Coord(40), double(n) / 24.0);
-            vdbexport::writeVdbAtomic((sDir / ("t_000" + std::to_string(n) + ".vdb")).string(), {t.velocity});
-        }
+        for (int n = 1; n <= 8; ++n)
+            lictest::writePresetField(sDir / ("t_000" + std::to_string(n) + ".vdb"), "tornado", openvdb::Coord(40),
+                                      lictest::PresetGrids::Velocity, double(n) / 24.0);
         // A long sequence (the steady abc flow still carries the noise), for parts of each frame.
         for (int n = 1; n <= 6; ++n)
             vdbexport::writeVdbAtomic((sDir / ("l_000" + std::to_string(n) + ".vdb")).string(), {abc.velocity});
     }
-    static void TearDownTestSuite() { fs::remove_all(sDir); }
-
-    void SetUp() override
-    {
-        mOut = sDir / ::testing::UnitTest::GetInstance()->current_test_info()->name();
-        fs::create_directories(mOut);
-    }
+    void SetUp() override { mOut = testDir(); }
 
     /// `licvdb bake ARGS --out NAME` in one process (`ranks` = 0) or under mpirun.
     RunResult bake(int ranks, const std::string& out, std::vector<std::string> args, const std::string& env = "")
@@ -117,7 +106,6 @@ protected:
         EXPECT_TRUE(left.empty()) << "left behind: " << (left.empty() ? "" : *left.begin()) << "\n" << r.describe();
     }
 
-    static inline fs::path sDir;
     fs::path mOut;
 };
 

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "CliRun.h"
+#include "../unit/TempDirSuite.h"
 #include "vdbexport/io/ImageIO.h"
 
 #include <nlohmann/json.hpp>
@@ -35,39 +36,35 @@ RunResult runIn(const fs::path& dir, const fs::path& logs, const std::vector<std
     return cli_test::runLicvdb(dir, logs, args);
 }
 
-class RenderCli : public ::testing::Test
+class RenderCli : public lictest::TempDirSuite<RenderCli>
 {
 protected:
     // Shared inputs: a 12³ abc field, a bake with tangent and colour, a 2-frame loop.
     static void SetUpTestSuite()
     {
-        sShared = fs::temp_directory_path() / ("licvdb_test_render_cli_" + std::to_string(::getpid()));
-        fs::remove_all(sShared);
-        fs::create_directories(sShared / "logs");
+        makeSuiteDir("test_render_cli", "logs");
         auto must = [](const RunResult& r) {
             if (r.code != 0) {
                 std::cerr << r.describe();
                 std::abort();
             }
         };
-        must(runIn(sShared, sShared / "logs", {"field", "abc", "--res", "12,12,12", "--out", "abc.vdb", "--quiet"}));
-        must(runIn(sShared, sShared / "logs",
+        must(runIn(sDir, sDir / "logs", {"field", "abc", "--res", "12,12,12", "--out", "abc.vdb", "--quiet"}));
+        must(runIn(sDir, sDir / "logs",
                    {"bake", "--field", "abc.vdb", "--out", "lic.vdb", "--length", "4", "--write-tangent", "--color",
                     "speed", "--quiet"}));
-        must(runIn(sShared, sShared / "logs",
+        must(runIn(sDir, sDir / "logs",
                    {"bake", "--field", "abc.vdb", "--out", "loop.vdb", "--length", "4", "--frames", "2", "--quiet"}));
     }
-    static void TearDownTestSuite() { fs::remove_all(sShared); }
-
     void SetUp() override
     {
         static std::atomic<int> counter{0};
-        mDir = sShared / ("t" + std::to_string(counter++));
+        mDir = sDir / ("t" + std::to_string(counter++));
         fs::create_directories(mDir);
     }
 
-    RunResult run(const std::vector<std::string>& args) { return runIn(mDir, sShared / "logs", args); }
-    static std::string shared(const std::string& name) { return (sShared / name).string(); }
+    RunResult run(const std::vector<std::string>& args) { return runIn(mDir, sDir / "logs", args); }
+    static std::string shared(const std::string& name) { return (sDir / name).string(); }
     fs::path out(const std::string& name) const { return mDir / name; }
     std::set<std::string> files() const
     {
@@ -76,11 +73,8 @@ protected:
         return s;
     }
 
-    static fs::path sShared;
     fs::path mDir;
 };
-
-fs::path RenderCli::sShared;
 
 double sum(const lic::Image& img)
 {
@@ -231,14 +225,14 @@ TEST_F(RenderCli, BadInputExitsTwoWithAMessageAndNoFile)
 // an image command without it fails with one message naming where it looked, exit 1, no file.
 TEST_F(RenderCli, TheImageLibrariesAreLoadedOnlyByImageCommands)
 {
-    const RunResult libs = cli_test::runShell(mDir, sShared / "logs", "ldd " + cli_test::shellQuote(LICVDB_EXE));
+    const RunResult libs = cli_test::runShell(mDir, sDir / "logs", "ldd " + cli_test::shellQuote(LICVDB_EXE));
     ASSERT_EQ(libs.code, 0) << libs.describe();
     EXPECT_NE(libs.out.find("libopenvdb"), std::string::npos) << libs.out;
     EXPECT_EQ(libs.out.find("libOpenImageIO"), std::string::npos) << libs.out;
     EXPECT_EQ(libs.out.find("libOpenColorIO"), std::string::npos) << libs.out;
 
     const auto withModule = [&](const std::string& module, const std::vector<std::string>& args) {
-        return cli_test::runShell(mDir, sShared / "logs",
+        return cli_test::runShell(mDir, sDir / "logs",
                                   "LICVDB_IMAGE_MODULE=" + cli_test::shellQuote(module) + " " + cli_test::licvdbCommand(args));
     };
     const std::string missing = (mDir / "nowhere" / "licvdb-image.so").string();

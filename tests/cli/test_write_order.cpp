@@ -9,6 +9,7 @@
 
 #include "CliRun.h"
 #include "../unit/ManifestDigests.h"
+#include "../unit/TempDirSuite.h"
 
 #include <nlohmann/json.hpp>
 
@@ -33,24 +34,16 @@ using cli_test::RunResult;
 
 namespace {
 
-class WriteOrder : public ::testing::Test
+class WriteOrder : public lictest::TempDirSuite<WriteOrder>
 {
 protected:
     static void SetUpTestSuite()
     {
-        sDir = fs::temp_directory_path() / ("licvdb_write_order_" + std::to_string(::getpid()));
-        fs::remove_all(sDir);
-        fs::create_directories(sDir / "logs");
+        makeSuiteDir("write_order", "logs");
         const RunResult r = cli_test::runLicvdb(sDir, sDir / "logs", {"field", "abc", "--res", "12,12,12", "--out", "abc.vdb", "--quiet"});
         ASSERT_EQ(r.code, 0) << r.describe();
     }
-    static void TearDownTestSuite() { fs::remove_all(sDir); }
-
-    void SetUp() override
-    {
-        mOut = sDir / ::testing::UnitTest::GetInstance()->current_test_info()->name();
-        fs::create_directories(mOut);
-    }
+    void SetUp() override { mOut = testDir(); }
 
     /// A 3-frame loop of the abc field into mOut/loop*, with `env` ("NAME=VALUE" …) set.
     RunResult bake(const std::vector<std::string>& env)
@@ -95,7 +88,6 @@ protected:
     }
 
     fs::path mOut;
-    static inline fs::path sDir;
 };
 
 const std::set<std::string> kFrames{"loop_0001.vdb", "loop_0002.vdb", "loop_0003.vdb"};

@@ -2,11 +2,11 @@
 // 1, 2, 3 and 4 threads in every grid and every loop frame; halo ≥ density on every voxel of a
 // bake; a loop traces the same streamlines as a still; streamed percentiles are exact.
 #include "vdbexport/bake/Bake.h"
-#include "vdbexport/io/AtomicWrite.h"
 
 #include "lic/field/ScalarField.h"
 
 #include "ManifestDigests.h"
+#include "TempDirSuite.h"
 
 #include "lic/util/Error.h"
 #include "lic/engine/Kernels.h"
@@ -36,20 +36,14 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class StreamBake : public ::testing::Test
+class StreamBake : public lictest::TempDirSuite<StreamBake>
 {
 protected:
     static void SetUpTestSuite()
     {
-        openvdb::initialize();
-        sDir = fs::temp_directory_path() / ("licvdb_stream_" + std::to_string(::getpid()));
-        fs::create_directories(sDir);
-        const lic::PresetField f = lic::makePresetField("tabbed-jet", openvdb::Coord(24, 24, 36));
-        openvdb::GridPtrVec grids{f.velocity};
-        for (const auto& s : f.scalars) grids.push_back(s);
-        vdbexport::writeVdbAtomic((sDir / "jet.vdb").string(), grids);
+        makeSuiteDir("stream");
+        lictest::writePresetField(sDir / "jet.vdb", "tabbed-jet", openvdb::Coord(24, 24, 36));
     }
-    static void TearDownTestSuite() { fs::remove_all(sDir); }
 
     /// Many bricks: a 48×48×72 output in 16³ bricks.
     static vdbexport::Recipe recipe(const std::string& out)
@@ -73,7 +67,6 @@ protected:
         r.output.writeSeries = true;
         return r;
     }
-    static inline fs::path sDir;
 };
 
 openvdb::GridPtrVec readAll(const std::string& path)
@@ -530,8 +523,7 @@ TEST_F(StreamBake, ASpotLoopThroughSqueezedLinesBakes)
     // nothing: their offset transport's determinant, expanded by column as Mat3::inverse() does,
     // came out exactly 0 where the row expansion did not, and the bake stopped with "Inversion of
     // singular 3x3 matrix". Such samples now push every voxel out of the spot's reach.
-    const lic::PresetField f = lic::makePresetField("vortex-ring", openvdb::Coord(32, 32, 32));
-    vdbexport::writeVdbAtomic((sDir / "ring.vdb").string(), openvdb::GridPtrVec{f.velocity});
+    lictest::writePresetField(sDir / "ring.vdb", "vortex-ring", openvdb::Coord(32, 32, 32), lictest::PresetGrids::Velocity);
     vdbexport::Recipe r;
     r.field.path = (sDir / "ring.vdb").string();
     r.output.path = (sDir / "ring_loop.vdb").string();

@@ -11,6 +11,8 @@
 #include "bake/FieldShare.h"
 #include "bake/Plan.h"
 
+#include "TempDirSuite.h"
+
 #include "lic/engine/Engine.h"
 #include "lic/util/Error.h"
 #include "lic/field/Presets.h"
@@ -32,19 +34,14 @@ using namespace vdbexport;
 
 namespace {
 
-class Distribute : public ::testing::Test
+class Distribute : public lictest::TempDirSuite<Distribute>
 {
 protected:
     static void SetUpTestSuite()
     {
-        openvdb::initialize();
-        sDir = fs::temp_directory_path() / ("licvdb_distribute_" + std::to_string(::getpid()));
-        fs::create_directories(sDir);
+        makeSuiteDir("distribute");
         // Dense, with a float grid the bake can colour by.
-        const lic::PresetField jet = lic::makePresetField("tabbed-jet", openvdb::Coord(20, 20, 28));
-        openvdb::GridPtrVec grids{jet.velocity};
-        for (const auto& s : jet.scalars) grids.push_back(s);
-        writeVdbAtomic((sDir / "jet.vdb").string(), grids);
+        lictest::writePresetField(sDir / "jet.vdb", "tabbed-jet", openvdb::Coord(20, 20, 28));
         // Sparse: a hole of inactive voxels and a ragged edge, so a part's own active box is not
         // the whole field's on any face; and a staggered copy of it.
         const lic::PresetField abc = lic::makePresetField("abc", openvdb::Coord(24));
@@ -61,7 +58,6 @@ protected:
         staggered->setGridClass(openvdb::GRID_STAGGERED);
         writeVdbAtomic((sDir / "staggered.vdb").string(), {staggered});
     }
-    static void TearDownTestSuite() { fs::remove_all(sDir); }
 
     static Recipe recipe(const std::string& field)
     {
@@ -73,7 +69,6 @@ protected:
         r.lic.engine = "fast"; // what bake() resolves "auto" to for noise
         return r;
     }
-    static inline fs::path sDir;
 };
 
 /// Every brick's channels, keyed by brick id.
@@ -216,8 +211,7 @@ TEST_F(Distribute, APartOfTheFieldConvolvesItsBricksLikeTheWholeField)
 TEST_F(Distribute, ARankHoldsOnlyItsPartOfALongField)
 {
     // 96×16×16 field voxels: 4 ranks get about a quarter of x each, plus the margin.
-    const lic::PresetField abc = lic::makePresetField("abc", openvdb::Coord(96, 16, 16));
-    writeVdbAtomic((sDir / "long.vdb").string(), {abc.velocity});
+    lictest::writePresetField(sDir / "long.vdb", "abc", openvdb::Coord(96, 16, 16), lictest::PresetGrids::Velocity);
     const Recipe r = recipe("long.vdb"); // the plan refers to it
     const pipeline::Plan plan = pipeline::makePlan(r);
     const pipeline::FieldShare whole = pipeline::readFieldShare(plan, 0, 1);

@@ -9,6 +9,7 @@
 #include "lic/field/Region.h"
 #include "lic/field/Scalars.h"
 
+#include "TempDirSuite.h"
 #include "TestFields.h"
 
 #include <gtest/gtest.h>
@@ -24,19 +25,14 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class HaloBake : public ::testing::Test
+class HaloBake : public lictest::TempDirSuite<HaloBake>
 {
 protected:
     static void SetUpTestSuite()
     {
-        openvdb::initialize();
-        sDir = fs::temp_directory_path() / ("licvdb_halos_" + std::to_string(::getpid()));
-        fs::create_directories(sDir);
-        const lic::PresetField f = lic::makePresetField("tabbed-jet", openvdb::Coord(40, 40, 60));
+        makeSuiteDir("halos");
+        const lic::PresetField f = lictest::writePresetField(sDir / "jet.vdb", "tabbed-jet", openvdb::Coord(40, 40, 60));
         sVelocity = f.velocity;
-        openvdb::GridPtrVec grids{f.velocity};
-        for (const auto& s : f.scalars) grids.push_back(s);
-        vdbexport::writeVdbAtomic((sDir / "jet.vdb").string(), grids);
         // ROI on speed: the fastest 10% of the jet's voxels (its core near the tabs).
         sSpeed = lic::deriveScalar(*f.velocity, "speed");
         std::vector<float> v;
@@ -44,7 +40,6 @@ protected:
         std::sort(v.begin(), v.end());
         sRoi = {v[v.size() * 9 / 10], v.back() * 1.01};
     }
-    static void TearDownTestSuite() { fs::remove_all(sDir); }
 
     static vdbexport::Recipe spotRecipe(const std::string& out)
     {
@@ -85,7 +80,6 @@ protected:
         return lic::roiWeight(speedAt(out, ijk), sRoi[0], sRoi[1]);
     }
 
-    static inline fs::path sDir;
     static inline openvdb::Vec3SGrid::Ptr sVelocity;
     static inline openvdb::FloatGrid::Ptr sSpeed;
     static inline std::array<double, 2> sRoi;
@@ -272,7 +266,7 @@ TEST_F(HaloBake, RecipeCombinationsThatMeanNothingAreRefused)
 TEST(SurfaceBake, SpotsOnTheRidgeOfSpeedGradientShowTheShearLayer)
 {
     // Shear layer: u = 1.5 + tanh((z − 15.5)/2.5) along x; |∇speed| peaks on the plane z = 15.5.
-    const fs::path dir = fs::temp_directory_path() / ("licvdb_surface_" + std::to_string(::getpid()));
+    const fs::path dir = lictest::processTempDir("surface");
     fs::create_directories(dir);
     auto grid = lictest::makeField(openvdb::Coord(32), 1.0, openvdb::Vec3d(0.0), [](const openvdb::Vec3d& p) {
         return openvdb::Vec3d(1.5 + std::tanh((p[2] - 15.5) / 2.5), 0.0, 0.1 * std::sin(p[0] / 5.0));

@@ -7,7 +7,6 @@
 #include "vdbexport/bake/Bake.h"
 #include "vdbexport/io/FieldSequence.h"
 #include "vdbexport/io/OutputNames.h"
-#include "vdbexport/io/AtomicWrite.h"
 
 #include "lic/util/Error.h"
 #include "lic/field/Presets.h"
@@ -17,6 +16,7 @@
 #include <openvdb/io/File.h>
 
 #include "ManifestDigests.h"
+#include "TempDirSuite.h"
 #include "TestFields.h"
 
 #include <gtest/gtest.h>
@@ -37,25 +37,21 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class Unsteady : public ::testing::Test
+class Unsteady : public lictest::TempDirSuite<Unsteady>
 {
 protected:
     static void SetUpTestSuite()
     {
-        openvdb::initialize();
-        sDir = fs::temp_directory_path() / ("licvdb_unsteady_" + std::to_string(::getpid()));
-        fs::create_directories(sDir);
+        makeSuiteDir("unsteady");
         // uniform: 33³ on [-1, 1], h = 1/16, v = (1, 0, 0): at 16 fps one field voxel = 2 output
         // voxels per frame. tornado: 40³, moving with time (frame n at time n/24).
         for (int n = 1; n <= 4; ++n) write("uniform", openvdb::Coord(33), 0.0, "u_" + std::to_string(n) + ".vdb");
         for (int n = 1; n <= 8; ++n)
             write("tornado", openvdb::Coord(40), double(n) / 24.0, vdbexport::expandFramePattern("t_####.vdb", n));
     }
-    static void TearDownTestSuite() { fs::remove_all(sDir); }
     static void write(const std::string& preset, const openvdb::Coord& res, double time, const std::string& name)
     {
-        const lic::PresetField f = lic::makePresetField(preset, res, time);
-        vdbexport::writeVdbAtomic((sDir / name).string(), {f.velocity});
+        lictest::writePresetField(sDir / name, preset, res, lictest::PresetGrids::Velocity, time);
     }
     static vdbexport::Recipe uniform(const std::string& out, const std::string& input)
     {
@@ -80,7 +76,6 @@ protected:
         r.lic.brick = 32;
         return r;
     }
-    static inline fs::path sDir;
 };
 
 openvdb::FloatGrid::Ptr density(const std::string& path)
@@ -537,8 +532,8 @@ TEST_F(Unsteady, BadSequencesAreRefusedAndWriteNothing)
     // A frame with another transform (a different resolution).
     fs::create_directories(sDir / "mixed");
     for (int n = 1; n <= 3; ++n) {
-        const lic::PresetField f = lic::makePresetField("tornado", openvdb::Coord(n == 3 ? 30 : 40), 0.0);
-        vdbexport::writeVdbAtomic((sDir / "mixed" / ("m_" + std::to_string(n) + ".vdb")).string(), {f.velocity});
+        lictest::writePresetField(sDir / "mixed" / ("m_" + std::to_string(n) + ".vdb"), "tornado",
+                                  openvdb::Coord(n == 3 ? 30 : 40), lictest::PresetGrids::Velocity);
     }
     vdbexport::Recipe mixed = tornado("bad3.vdb", "noise");
     mixed.field.path = (sDir / "mixed" / "m_%d.vdb").string();

@@ -6,6 +6,7 @@
 // test here (or a note why it cannot be reached) fails.
 #include <gtest/gtest.h>
 
+#include "TempDirSuite.h"
 #include "VdbMutants.h"
 #include "VdbSamples.h"
 
@@ -306,20 +307,13 @@ void expectRefusedBy(const std::string& path, const std::string& rule, const std
     EXPECT_EQ(inputErrorOf([&] { (void)vdbexport::describeVdb(path); }), msg);
 }
 
-class VdbCheckRulesTest : public ::testing::Test
+class VdbCheckRulesTest : public lictest::TempDirSuite<VdbCheckRulesTest>
 {
 protected:
     static void SetUpTestSuite()
     {
-        openvdb::initialize();
-        sDir = fs::temp_directory_path() / ("licvdb_test_vdbcheck_rules_" + std::to_string(::getpid()));
-        fs::create_directories(sDir / "samples");
+        makeSuiteDir("test_vdbcheck_rules", "samples");
         vdb_samples::writeVdbSamples(sDir / "samples");
-    }
-    static void TearDownTestSuite()
-    {
-        std::error_code ec;
-        fs::remove_all(sDir, ec);
     }
     static std::string sample(const std::string& name) { return readFile(sDir / "samples" / name); }
     /// A file of this test's own in the suite's directory.
@@ -327,7 +321,6 @@ protected:
     {
         return sDir / (std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + "_" + name);
     }
-    static inline fs::path sDir;
 };
 
 // ---- the rules --------------------------------------------------------------------------------
