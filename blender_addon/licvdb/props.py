@@ -134,7 +134,8 @@ class LICVDB_ObjectSettings(bpy.types.PropertyGroup):
 
 SCALARS = [("NONE", "None", "Uncoloured"), ("speed", "Speed", ""), ("vorticity", "Vorticity", "|curl v|"),
            ("streamwise-vorticity", "Streamwise vorticity", ""), ("helicity", "Helicity", ""),
-           ("q-criterion", "Q criterion", ""), ("density", "Smoke density", "The simulation's density grid"),
+           ("q-criterion", "Q criterion", ""), ("lambda2", "λ2", "λ2 vortex criterion: negative in vortex cores"),
+           ("density", "Smoke density", "The simulation's density grid"),
            ("temperature", "Temperature", "The simulation's temperature grid")]
 ROI_SCALARS = [i for i in SCALARS if i[0] != "NONE"]
 COLORMAPS = [(n, n, "") for n in ("viridis", "magma", "inferno", "cividis", "heated-object", "red-yellow",

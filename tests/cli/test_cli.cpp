@@ -604,6 +604,33 @@ TEST_F(CliTest, RecipeSetsLengthAndFlagOverrides)
 
 // ---- 5. info, help, version ------------------------------------------------------------------
 
+// `licvdb help --json`: the choices from their tables (the add-on's lists are checked against it
+// in Blender), each one accepted by `bake` and named in `help bake`.
+TEST_F(CliTest, HelpJsonListsTheChoicesBakeAccepts)
+{
+    const RunResult r = run({"help", "--json"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    json c;
+    ASSERT_NO_THROW(c = json::parse(r.out)) << r.describe();
+    EXPECT_EQ(c.at("kernels"), json({"box", "exp"}));
+    EXPECT_EQ(c.at("engines"), json({"naive", "fast", "splat"}));
+    EXPECT_EQ(c.at("distributions"), json({"regular", "random", "jittered", "poisson"}));
+    EXPECT_EQ(c.at("scalars").size(), 6u);
+    EXPECT_EQ(c.at("colormaps").size(), 8u);
+    const RunResult help = run({"help", "bake"});
+    for (const char* key : {"kernels", "engines", "scalars", "colormaps"})
+        for (const auto& n : c.at(key)) EXPECT_NE(help.out.find(n.get<std::string>()), std::string::npos) << key << " " << n;
+    const fs::path field = makeField("abc.vdb");
+    for (const auto& m : c.at("colormaps")) {
+        const RunResult b = bake(field, work("cm.vdb"), {"--color", "speed", "--colormap", m.get<std::string>(), "--quiet"});
+        EXPECT_EQ(b.code, 0) << m << "\n" << b.describe();
+    }
+    for (const auto& k : c.at("kernels")) {
+        const RunResult b = bake(field, work("k.vdb"), {"--kernel", k.get<std::string>(), "--quiet"});
+        EXPECT_EQ(b.code, 0) << k << "\n" << b.describe();
+    }
+}
+
 TEST_F(CliTest, InfoHelpVersion)
 {
     const fs::path field = makeField("abc.vdb");

@@ -86,8 +86,9 @@ void BakeCommand::addLicFlags()
     RecipeFlags& f = *mFlags;
     f.option<std::string>("--input", "input.type", "Input texture: noise|spots [noise]");
     f.option<std::string>("--noise-filter", "input.noise_filter", "Noise reconstruction: binomial|none [binomial]");
-    f.option<std::string>("--engine", "lic.engine", "auto|naive|fast|splat: auto = splat for spots, fast for noise [auto]");
-    f.option<std::string>("--kernel", "lic.kernel", "box|exp (oriented streamlets, bright head downstream) [box]");
+    f.option<std::string>("--engine", "lic.engine", "auto|" + joined(choices().engines) + ": auto = splat for spots, fast for noise [auto]");
+    f.option<std::string>("--kernel", "lic.kernel", joined(choices().kernels) +
+                                                         " (exp: oriented streamlets, bright head downstream) [box]");
     f.option<double>("--decay", "lic.decay", "exp kernel: weight ratio of consecutive samples, (0,1) [0.9]");
     f.option<double>("--length", "lic.length", "Kernel half-length, output voxels [20]");
     f.option<double>("--step", "lic.step", "Sample spacing along streamlines, output voxels [0.5]");
@@ -104,9 +105,10 @@ void BakeCommand::addColorFlags()
 {
     RecipeFlags& f = *mFlags;
     f.text("--color", "color.scalar",
-           "Colour by a scalar: speed, vorticity, streamwise-vorticity, helicity, q-criterion, lambda2, or a float grid of the field file; NAME-abs = |NAME|, NAME-gradient = |grad NAME|");
+           "Colour by a scalar: " + joined(choices().scalars, ", ") +
+               ", or a float grid of the field file; NAME-abs = |NAME|, NAME-gradient = |grad NAME|");
     f.option<std::string>("--colormap", "color.colormap",
-                          "heated-object|red-yellow|grey-purple|viridis|magma|inferno|cividis|coolwarm or a value,r,g,b .csv [viridis]");
+                          joined(choices().colormaps) + " or a value,r,g,b .csv [viridis]");
     f.needsSection("color", "--colormap needs a colour scalar: add --color SCALAR");
 }
 

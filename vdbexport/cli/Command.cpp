@@ -1,6 +1,13 @@
 // The command table and what the commands share.
 #include "Command.h"
 
+#include <lic/composite/Colormap.h>
+#include <lic/engine/Engine.h>
+#include <lic/engine/Settings.h>
+#include <lic/field/Scalars.h>
+#include <lic/texture/Spots.h>
+#include <lic/util/Names.h>
+
 #include <array>
 #include <cstdlib>
 
@@ -21,6 +28,24 @@ const std::array<CommandEntry, 7> kCommands{{
 } // namespace
 
 std::span<const CommandEntry> commandTable() { return kCommands; }
+
+Choices choices()
+{
+    Choices c;
+    for (const lic::EngineInfo& e : lic::engines()) c.engines.emplace_back(e.name);
+    c.kernels = lic::listedNames(lic::kernelNames());
+    c.distributions = lic::listedNames(lic::spotDistributionNames());
+    c.scalars = lic::derivedScalarNames();
+    c.colormaps = lic::Colormap::names();
+    return c;
+}
+
+std::string joined(const std::vector<std::string>& names, const char* separator)
+{
+    std::string out;
+    for (const std::string& n : names) out += (out.empty() ? "" : separator) + n;
+    return out;
+}
 
 std::string helpTopics(const char* lastSeparator)
 {

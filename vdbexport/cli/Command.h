@@ -11,6 +11,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 namespace vdbexport::cli {
 
@@ -82,6 +83,16 @@ std::span<const CommandEntry> commandTable();
 
 /// The commands that have help of their own, as prose: "field, bake, render or info".
 std::string helpTopics(const char* lastSeparator);
+
+/// The names of licvdb's choices, from their tables (lic's engines, kernels, spot distributions,
+/// derived scalars and colormaps): `licvdb help --json` prints them and the help texts list them.
+struct Choices
+{
+    std::vector<std::string> engines, kernels, distributions, scalars, colormaps;
+};
+Choices choices();
+/// "a|b|c" (or with another separator).
+std::string joined(const std::vector<std::string>& names, const char* separator = "|");
 
 /// True in the child process that checks a .vdb before this program reads it
 /// (LICVDB_READ_CHILD=1, see vdbexport::setReadIsolation).

@@ -4,6 +4,8 @@
 
 #include <lic/util/Error.h>
 
+#include <nlohmann/json.hpp>
+
 #include <iostream>
 
 namespace vdbexport::cli {
@@ -13,10 +15,24 @@ namespace {
 class HelpCommand final : public Command
 {
 public:
-    void addOptions(CLI::App& cmd) override { cmd.add_option("command", mTopic, helpTopics(", ")); }
+    void addOptions(CLI::App& cmd) override
+    {
+        cmd.add_option("command", mTopic, helpTopics(", "));
+        cmd.add_flag("--json", mJson,
+                     "Print licvdb's choices as JSON: engines, kernels, spot distributions, derived scalars, colormaps "
+                     "(for programs, e.g. the Blender add-on's tests)");
+    }
 
     int run(Context& context) override
     {
+        if (mJson) {
+            const Choices c = choices();
+            const nlohmann::json j = {{"version", LICVDB_VERSION}, {"engines", c.engines}, {"kernels", c.kernels},
+                                      {"distributions", c.distributions}, {"scalars", c.scalars},
+                                      {"colormaps", c.colormaps}};
+            std::cout << j.dump(2) << "\n";
+            return 0;
+        }
         if (mTopic.empty()) {
             std::cout << synopsis(context.app);
             return 0;
@@ -33,6 +49,7 @@ public:
 
 private:
     std::string mTopic;
+    bool mJson = false;
 };
 
 class VersionCommand final : public Command
