@@ -3,9 +3,15 @@
 // smoke simulation cache generated headless by tests/inputs/blender_smoke_cache.py.
 #include "InputsHarness.h"
 
+#include "vdbexport/bake/Recipe.h"
+#include "vdbexport/io/InputFormats.h"
+
+#include <lic/util/Error.h>
+
 #include <nlohmann/json.hpp>
 #include <openvdb/io/File.h>
 
+#include <algorithm>
 #include <map>
 
 using namespace inputs_test;
@@ -192,4 +198,76 @@ TEST_F(InputsTest, OpenVdb13FieldBakesQuietly)
     const RunResult info = run({"info", field});
     ASSERT_EQ(info.code, 0) << info.describe();
     EXPECT_EQ(info.err, "") << info.describe();
+}
+
+// The input formats are one table (vdbexport/io/InputFormats.h): `licvdb help --json` lists its
+// rows, bake's help and the recipe's allowed values name them, and every extension a row lists
+// picks that row by path (or an earlier row that shares it: .vtk is dense until its content says mesh).
+TEST_F(InputsTest, HelpJsonListsTheInputFormats)
+{
+    const RunResult r = run({"help", "--json"});
+    ASSERT_EQ(r.code, 0) << r.describe();
+    json c;
+    ASSERT_NO_THROW(c = json::parse(r.out)) << r.describe();
+    ASSERT_TRUE(c.contains("formats") && c.at("formats").is_array()) << r.out;
+    std::vector<std::string> names;
+    for (const auto& f : c.at("formats")) {
+        names.push_back(f.at("name").get<std::string>());
+        EXPECT_FALSE(f.at("extensions").empty()) << f;
+        for (const auto& e : f.at("extensions")) EXPECT_EQ(e.get<std::string>().front(), '.') << f;
+        EXPECT_TRUE(f.at("kind") == "grid" || f.at("kind") == "dense" || f.at("kind") == "mesh") << f;
+        EXPECT_FALSE(f.at("description").get<std::string>().empty()) << f;
+        const auto* row = vdbexport::findInputFormat(names.back());
+        ASSERT_NE(row, nullptr) << f;
+        EXPECT_EQ(f.at("kind") == "mesh", vdbexport::isMeshFormat(row->name)) << f;
+        EXPECT_EQ(f.at("kind") == "dense", row->parse != nullptr) << f;
+    }
+    EXPECT_EQ(names, (std::vector<std::string>{"vdb", "npy", "vti", "vtk", "raw", "vtu", "vts", "vtm", "vtpc", "pvd",
+                                               "vtk-mesh", "plot3d", "openfoam"}));
+    const auto raw = std::find_if(c.at("formats").begin(), c.at("formats").end(), [](const json& f) { return f.at("name") == "raw"; });
+    EXPECT_EQ(raw->at("extensions"), json({".raw", ".bin", ".dat"}));
+    EXPECT_EQ(raw->at("kind"), "dense");
+    EXPECT_EQ(raw->at("description"), "a raw binary field file");
+
+    // The recipe accepts "auto" and every name; bake's and convert's --format help list them.
+    std::vector<std::string> values{"auto"};
+    values.insert(values.end(), names.begin(), names.end());
+    EXPECT_EQ(vdbexport::allowedValues("field.format"), values);
+    const std::string list = "auto|vdb|npy|vti|vtk|raw|vtu|vts|vtm|vtpc|pvd|vtk-mesh|plot3d|openfoam";
+    for (const char* command : {"bake", "convert"}) {
+        const RunResult help = run({"help", command});
+        EXPECT_NE(help.out.find(list), std::string::npos) << command << "\n" << help.describe();
+    }
+
+    // Each extension (any case) picks its row, or the earlier row sharing it.
+    for (const auto& f : c.at("formats"))
+        for (const auto& e : f.at("extensions")) {
+            const std::string ext = e.get<std::string>();
+            std::string upper = ext;
+            for (auto& ch : upper) ch = char(std::toupper(static_cast<unsigned char>(ch)));
+            for (const std::string& path : {"field" + ext, "FIELD" + upper}) {
+                const std::string got = vdbexport::formatFromPath(path);
+                EXPECT_TRUE(got == f.at("name") || (f.at("name") == "vtk-mesh" && got == "vtk")) << path << ": " << got;
+            }
+        }
+    fs::create_directories(work("case/system"));
+    std::ofstream(work("case/system/controlDict")) << "FoamFile {}\n";
+    EXPECT_EQ(vdbexport::formatFromPath(work("case").string()), "openfoam");
+    EXPECT_EQ(vdbexport::formatFromPath(work("case/system/controlDict").string()), "openfoam");
+
+    // An unknown extension: the message names the file, the extension, every known extension and --format.
+    try {
+        vdbexport::formatFromPath("field.hdf5");
+        ADD_FAILURE() << "field.hdf5 was given a format";
+    } catch (const lic::InputError& e) {
+        const std::string m = e.what();
+        for (const char* part : {"'field.hdf5'", "'.hdf5'", ".raw/.bin/.dat", ".vtpc", ".xyz/.p3d/.x", ".foam", "OpenFOAM case",
+                                 "--format vdb|npy|"})
+            EXPECT_NE(m.find(part), std::string::npos) << part << " in: " << m;
+    }
+    // An unknown --format names the known ones (bake refuses it in the recipe already).
+    const RunResult bad = run({"convert", work("f.npy").string(), "--format", "hdf5", "--out", work("o.vdb").string()});
+    EXPECT_NE(bad.code, 0) << bad.describe();
+    EXPECT_NE(bad.err.find("'hdf5'"), std::string::npos) << bad.describe();
+    EXPECT_NE(bad.err.find(list), std::string::npos) << bad.describe();
 }

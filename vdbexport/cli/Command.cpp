@@ -1,6 +1,8 @@
 // The command table and what the commands share.
 #include "Command.h"
 
+#include "vdbexport/io/InputFormats.h"
+
 #include <lic/composite/Colormap.h>
 #include <lic/engine/Engine.h>
 #include <lic/engine/Settings.h>
@@ -37,6 +39,7 @@ Choices choices()
     c.distributions = lic::listedNames(lic::spotDistributionNames());
     c.scalars = lic::derivedScalarNames();
     c.colormaps = lic::Colormap::names();
+    c.formats = inputFormatValues();
     return c;
 }
 

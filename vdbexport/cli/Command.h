@@ -85,10 +85,11 @@ std::span<const CommandEntry> commandTable();
 std::string helpTopics(const char* lastSeparator);
 
 /// The names of licvdb's choices, from their tables (lic's engines, kernels, spot distributions,
-/// derived scalars and colormaps): `licvdb help --json` prints them and the help texts list them.
+/// derived scalars and colormaps; the input formats of vdbexport/io/InputFormats.h, "auto"
+/// first): `licvdb help --json` prints them and the help texts list them.
 struct Choices
 {
-    std::vector<std::string> engines, kernels, distributions, scalars, colormaps;
+    std::vector<std::string> engines, kernels, distributions, scalars, colormaps, formats;
 };
 Choices choices();
 /// "a|b|c" (or with another separator).

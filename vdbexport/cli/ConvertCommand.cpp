@@ -5,12 +5,14 @@
 
 #include "vdbexport/io/FieldInput.h"
 #include "vdbexport/io/FieldSequence.h"
+#include "vdbexport/io/InputFormats.h"
 #include "vdbexport/io/MeshInput.h"
 #include "vdbexport/io/Numbers.h"
 #include "vdbexport/io/OutputSet.h"
 
 #include <lic/util/Error.h>
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 #include <sstream>
@@ -42,11 +44,17 @@ private:
 
 void ConvertCommand::addOptions(CLI::App& cmd)
 {
-    cmd.add_option("input", mInput, "Field to convert: a mesh (.vtu .vts .vtm .vtpc .pvd .vtk .xyz, an OpenFOAM case "
-                                    "directory) or any field bake reads")
+    std::vector<std::string> meshes; // each mesh format's usual extension, then what a row picks by path
+    for (const InputFormat& f : inputFormats())
+        if (f.kind == InputKind::Mesh && std::find(meshes.begin(), meshes.end(), f.extensions.front()) == meshes.end())
+            meshes.push_back(f.extensions.front());
+    std::string byPath;
+    for (const InputFormat& f : inputFormats())
+        if (f.matchesPath) byPath += ", " + f.description;
+    cmd.add_option("input", mInput, "Field to convert: a mesh (" + joined(meshes, " ") + byPath + ") or any field bake reads")
         ->required();
     cmd.add_option("-o,--out", mOut, "Output .vdb; for a series, a pattern with #### for the time step's index");
-    cmd.add_option("--format", mFormat, "Input format (as bake's --format) [auto: by extension]");
+    cmd.add_option("--format", mFormat, "Input format: " + inputFormatHelp() + " [auto: by extension]");
     cmd.add_option("--grid", mGrid, "Velocity array (default: U, velocity, vel, v, the only vector array)");
     mVoxelOption = cmd.add_option("--voxel-size", mVoxelSize, "Voxel size of the lattice, world units [median cell size]")
                        ->check(CLI::PositiveNumber);
@@ -153,7 +161,7 @@ int ConvertCommand::list(const std::string& format) const
 int ConvertCommand::run(Context&)
 {
     FieldSpec base = spec();
-    std::string format = base.format == "auto" ? formatFromPath(mInput) : base.format;
+    const std::string format = resolveInputFormat(mInput, base.format);
     if (mList) return list(format);
     if (mOut.empty()) throw lic::InputError("--out is required (or --list to describe the input)");
     const std::vector<double> times = chooseTimes(format);

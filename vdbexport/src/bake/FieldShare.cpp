@@ -5,6 +5,7 @@
 
 #include "io/DenseCommon.h"
 #include "vdbexport/io/FieldGrids.h"
+#include "vdbexport/io/InputFormats.h"
 #include "vdbexport/io/ReadCheck.h"
 #include "vdbexport/io/VdbReader.h"
 
@@ -35,11 +36,11 @@ std::string wholeReadReason(const Recipe& r, std::string& velName)
 {
     std::string format;
     try {
-        format = r.field.format.empty() || r.field.format == "auto" ? formatFromPath(r.field.path) : r.field.format;
+        format = resolveInputFormat(r.field.path, r.field.format);
     } catch (const lic::InputError&) {
         return "the field's format is not known"; // the whole read reports it
     }
-    if (format != "vdb") return "a ." + format + " field has no partial read";
+    if (findInputFormat(format)->kind != InputKind::Grid) return "a ." + format + " field has no partial read";
     if (r.field.crop) return "field.crop needs the whole field";
     if (r.field.resample) return "field.resample needs the whole field";
     if (r.field.mask == "zero") return "field.mask \"zero\" needs the whole field";

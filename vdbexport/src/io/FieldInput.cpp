@@ -1,5 +1,6 @@
 // loadField(): the single entry point that reads a bake's field in any supported format.
 #include "vdbexport/io/FieldInput.h"
+#include "vdbexport/io/InputFormats.h"
 #include "vdbexport/io/MeshInput.h"
 #include "vdbexport/io/FieldGrids.h"
 
@@ -45,12 +46,6 @@ std::string readFileBytes(const std::string& path, const std::string& what)
     return bytes;
 }
 
-std::string lower(std::string s)
-{
-    for (auto& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
-    return s;
-}
-
 openvdb::math::Transform::Ptr denseTransform(const openvdb::Vec3d& origin, const openvdb::Vec3d& spacing)
 {
     openvdb::Mat4d m = openvdb::Mat4d::identity();
@@ -82,24 +77,24 @@ typename GridT::Ptr fillGrid(const std::array<std::int64_t, 3>& dims, Get&& get)
     return grid;
 }
 
-} // namespace
-
-std::string formatFromPath(const std::string& path)
+/// "npy, vti, vtk, raw": the dense formats, for messages.
+std::string denseNames()
 {
-    std::error_code ec;
-    if (fs::is_directory(path, ec) && fs::exists(fs::path(path) / "system" / "controlDict", ec)) return "openfoam";
-    const std::string ext = lower(fs::path(path).extension().string());
-    if (fs::path(path).filename() == "controlDict" || ext == ".foam") return "openfoam";
-    if (ext == ".vtu" || ext == ".vts" || ext == ".vtm" || ext == ".vtpc" || ext == ".pvd") return ext.substr(1);
-    if (ext == ".xyz" || ext == ".p3d" || ext == ".x") return "plot3d";
-    if (ext == ".vdb") return "vdb";
-    if (ext == ".npy") return "npy";
-    if (ext == ".vti") return "vti";
-    if (ext == ".vtk") return "vtk";
-    if (ext == ".raw" || ext == ".bin" || ext == ".dat") return "raw";
-    throw lic::InputError("cannot tell the format of " + q(path) + " from its extension '" + ext
-                          + "'; expected .vdb, .npy, .vti, .vtk, .raw/.bin/.dat, or pass --format vdb|npy|vti|vtk|raw");
+    std::string out;
+    for (const std::string& n : inputFormatNames(InputKind::Dense)) out += (out.empty() ? "" : ", ") + n;
+    return out;
 }
+
+/// "raw": the formats that take field.shape, for messages.
+std::string shapeNames()
+{
+    std::string out;
+    for (const InputFormat& f : inputFormats())
+        if (f.needsShape) out += (out.empty() ? "" : ", ") + f.name;
+    return out;
+}
+
+} // namespace
 
 void denseToGrids(const DenseImage& image, const std::string& vectorName, const std::string& source, LoadedField& out)
 {
@@ -156,24 +151,6 @@ void denseToGrids(const DenseImage& image, const std::string& vectorName, const 
     }
 }
 
-bool isLegacyVtkMesh(const std::string& path)
-{
-    std::ifstream in(path, std::ios::binary);
-    std::string head(1024, '\0');
-    in.read(head.data(), std::streamsize(head.size()));
-    head.resize(std::size_t(in.gcount()));
-    const std::string upper = [&] {
-        std::string u = head;
-        for (auto& c : u) c = char(std::toupper(static_cast<unsigned char>(c)));
-        return u;
-    }();
-    const auto at = upper.find("DATASET");
-    if (at == std::string::npos) return false;
-    const auto type = upper.substr(at + 7, 40);
-    return type.find("UNSTRUCTURED_GRID") != std::string::npos || type.find(" STRUCTURED_GRID") != std::string::npos
-           || type.find("RECTILINEAR_GRID") != std::string::npos;
-}
-
 LoadedField loadField(const FieldSpec& spec) { return loadField(spec, lic::nullProgress()); }
 
 LoadedField loadField(const FieldSpec& spec, lic::Progress& progress)
@@ -181,11 +158,11 @@ LoadedField loadField(const FieldSpec& spec, lic::Progress& progress)
     openvdb::initialize();
     LoadedField out;
     const std::string& path = spec.path;
-    out.format = spec.format.empty() || spec.format == "auto" ? formatFromPath(path) : spec.format;
-    if (out.format == "vtk" && isLegacyVtkMesh(path)) out.format = "vtk-mesh";
+    out.format = resolveInputFormat(path, spec.format);
+    const InputFormat& format = *findInputFormat(out.format);
     if (out.format != "plot3d" && !spec.solution.empty())
         throw lic::InputError("field.solution (--solution) names a PLOT3D .q file; " + q(path) + " is not PLOT3D");
-    if (isMeshFormat(out.format)) {
+    if (format.kind == InputKind::Mesh) {
         if (spec.origin || spec.shape)
             throw lic::InputError("field.origin / field.shape (--origin, --shape) apply to dense inputs; the mesh "
                                   + q(path) + " carries its own coordinates");
@@ -208,31 +185,23 @@ LoadedField loadField(const FieldSpec& spec, lic::Progress& progress)
     } else if (spec.time) {
         throw lic::InputError("field.time (--time) picks a time of a series (.pvd, an OpenFOAM case); " + q(path)
                               + " is a single field");
-    } else if (out.format == "vdb") {
+    } else if (format.kind == InputKind::Grid) {
         if (spec.voxelSize || spec.origin)
-            throw lic::InputError("field.voxel_size / field.origin (--voxel-size, --origin) apply to dense inputs (npy, vti, "
-                                  "vtk, raw); a .vdb file carries its own transform (use --resample to change the voxel size)");
+            throw lic::InputError("field.voxel_size / field.origin (--voxel-size, --origin) apply to dense inputs ("
+                                  + denseNames() + "); " + format.description
+                                  + " carries its own transform (use --resample to change the voxel size)");
         out.velocity = readVelocityGrid(path, spec.grid, &out.gridName);
         out.scalars = readScalarGrids(path);
     } else {
-        const std::string what = out.format == "npy"   ? "a NumPy .npy file"
-                                 : out.format == "vti" ? "a VTK XML image data .vti file"
-                                 : out.format == "vtk" ? "a legacy VTK .vtk file"
-                                                       : "a raw binary field file";
-        if (out.format == "raw" && !spec.shape)
-            throw lic::InputError("raw field " + q(path) + " needs its shape: pass --shape X,Y,Z (and --dtype float32|float64)");
-        if (out.format != "raw" && spec.shape)
-            throw lic::InputError("field.shape (--shape) applies to raw input only; " + q(path) + " is " + what
-                                  + " and declares its own shape");
+        const std::string& what = format.description;
+        if (format.needsShape && !spec.shape)
+            throw lic::InputError(out.format + " field " + q(path)
+                                  + " needs its shape: pass --shape X,Y,Z (and --dtype float32|float64)");
+        if (!format.needsShape && spec.shape)
+            throw lic::InputError("field.shape (--shape) applies to " + shapeNames() + " input only; " + q(path) + " is "
+                                  + what + " and declares its own shape");
         const std::string bytes = readFileBytes(path, what);
-        DenseImage img;
-        if (out.format == "npy") img = parseNpy(bytes, path);
-        else if (out.format == "vti") img = parseVti(bytes, path);
-        else if (out.format == "vtk") img = parseLegacyVtk(bytes, path);
-        else {
-            const auto& s = *spec.shape;
-            img = parseRaw(bytes, {std::int64_t(s[0]), std::int64_t(s[1]), std::int64_t(s[2])}, spec.dtype, path);
-        }
+        DenseImage img = format.parse(bytes, spec, path);
         if (spec.voxelSize) img.spacing = openvdb::Vec3d(*spec.voxelSize);
         if (spec.origin) img.origin = openvdb::Vec3d((*spec.origin)[0], (*spec.origin)[1], (*spec.origin)[2]);
         denseToGrids(img, spec.grid, path, out);

@@ -321,16 +321,24 @@ vtkSmartPointer<vtkDataObject> readPlot3d(const std::string& path, const MeshOpt
     return r->GetOutputDataObject(0);
 }
 
-/// What the reader of `format` gives for `path`: the time read and the series' times (sorted) are
-/// set for a series (pvd, openfoam), left empty otherwise.
-vtkSmartPointer<vtkDataObject> readSingle(const std::string& path, const std::string& format, const MeshOptions& options,
-                                          std::optional<double>& timeRead, std::vector<double>& times)
+/// What VTK's reader of `format` gives for the one file `path`; nothing for a format that is not
+/// one file read by one VTK reader (pvd, plot3d, openfoam). The others are what a .pvd may list.
+std::optional<vtkSmartPointer<vtkDataObject>> readOneFile(const std::string& path, const std::string& format)
 {
     if (format == "vtu") return readFile<vtkXMLUnstructuredGridReader>(path, format);
     if (format == "vts") return readFile<vtkXMLStructuredGridReader>(path, format);
     if (format == "vtm") return readFile<vtkXMLMultiBlockDataReader>(path, format);
     if (format == "vtpc") return readFile<vtkXMLPartitionedDataSetCollectionReader>(path, format);
     if (format == "vtk-mesh") return readFile<vtkGenericDataObjectReader>(path, format);
+    return std::nullopt;
+}
+
+/// What the reader of `format` gives for `path`: the time read and the series' times (sorted) are
+/// set for a series (pvd, openfoam), left empty otherwise.
+vtkSmartPointer<vtkDataObject> readSingle(const std::string& path, const std::string& format, const MeshOptions& options,
+                                          std::optional<double>& timeRead, std::vector<double>& times)
+{
+    if (auto data = readOneFile(path, format)) return *data;
     if (format == "plot3d") return readPlot3d(path, options);
     if (format == "openfoam") {
         auto r = openFoamReader(path);
@@ -353,13 +361,12 @@ vtkSmartPointer<vtkDataObject> readSingle(const std::string& path, const std::st
         unsigned n = 0;
         for (const auto& e : entries) {
             if (e.time != t) continue;
-            std::optional<double> ignored;
-            std::vector<double> none;
             const std::string ext = lower(fs::path(e.file).extension().string());
             const std::string meshFormat = ext == ".vtk" ? "vtk-mesh" : ext.empty() ? "" : ext.substr(1);
-            if (!isMeshFormat(meshFormat) || meshFormat == "pvd" || meshFormat == "plot3d" || meshFormat == "openfoam")
-                detail::inputError(path, "lists " + q(e.file) + ", which is not a mesh file (.vtu, .vts, .vtm, .vtk)");
-            blocks->SetBlock(n++, readSingle(e.file, meshFormat, options, ignored, none));
+            auto block = readOneFile(e.file, meshFormat);
+            if (!block)
+                detail::inputError(path, "lists " + q(e.file) + ", which is not a mesh file (.vtu, .vts, .vtm, .vtpc, .vtk)");
+            blocks->SetBlock(n++, *block);
         }
         return blocks;
     }

@@ -1,13 +1,15 @@
 // Loading a bake's vector field from any supported file format, and preparing it (NaN policy,
 // crop, masking, resampling) before the convolution. One entry point: loadField().
 //
-// Formats: OpenVDB (.vdb: Blender/mantaflow caches, Houdini `vel` or split `vel.x/.y/.z`),
-// NumPy (.npy), VTK XML image data (.vti), legacy VTK STRUCTURED_POINTS (.vtk) and raw
-// binary (.raw/.bin with an explicit shape and dtype). Dense formats become sparse Vec3 grids
-// whose voxel (i,j,k) has its centre at world position origin + (i,j,k)·voxel_size.
+// Formats (the table in InputFormats.h): OpenVDB (.vdb: Blender/mantaflow caches, Houdini `vel`
+// or split `vel.x/.y/.z`), the dense NumPy (.npy), VTK XML image data (.vti), legacy VTK
+// STRUCTURED_POINTS (.vtk) and raw binary (.raw/.bin/.dat with an explicit shape and dtype), and
+// meshes (MeshInput.h). Dense formats become sparse Vec3 grids whose voxel (i,j,k) has its centre
+// at world position origin + (i,j,k)·voxel_size.
 #pragma once
 
 #include "vdbexport/io/FieldSpec.h"
+#include "vdbexport/io/InputFormats.h"
 
 #include <lic/util/Progress.h>
 
@@ -74,10 +76,6 @@ DenseImage parseLegacyVtk(std::string_view bytes, const std::string& source);
 DenseImage parseRaw(std::string_view bytes, const std::array<std::int64_t, 3>& shape,
                     const std::string& dtype, const std::string& source);
 
-/// The field format for a path by its extension: "vdb", "npy", "vti", "vtk" or "raw"
-/// (.raw, .bin, .dat). @throw lic::InputError for any other extension (pass --format).
-std::string formatFromPath(const std::string& path);
-
 /// @brief Turn a dense image into grids: the vector array `vectorName` (empty: `velocity`, `vel`,
 ///        `v`, else the only 3-component array) becomes a cell-centred Vec3SGrid named
 ///        `gridName`-or-its-array-name; every 1-component array becomes a FloatGrid. Voxels
@@ -93,7 +91,7 @@ struct LoadedField
     openvdb::Vec3SGrid::Ptr velocity;                        ///< the prepared field
     std::map<std::string, openvdb::FloatGrid::Ptr> scalars;  ///< other scalar grids of the file, by name
     std::string gridName;                                    ///< name of the velocity grid or array
-    std::string format;                                      ///< "vdb", "npy", "vti", "vtk", "raw", a mesh format
+    std::string format;                                      ///< the name of its row of inputFormats()
     std::uint64_t nonFiniteReplaced = 0;                     ///< NaN/Inf values set to 0 (nan_policy zero)
     std::vector<std::string> notes;                          ///< what preparation did, for stderr
 };

@@ -13,9 +13,8 @@ struct FieldSpec
 {
     std::string path; ///< `path`: field file (VDB, ...); may be empty until the CLI sets it
     std::string grid; ///< `grid`: vector grid name; "" picks the default grid
-    /// `format`: "auto" (by extension; a directory with system/controlDict is OpenFOAM) | "vdb" |
-    /// "npy" | "vti" | "vtk" | "raw" | meshes (docs/inputs.md): "vtu" | "vts" | "vtm" | "vtpc" |
-    /// "pvd" | "vtk-mesh" | "plot3d" | "openfoam"
+    /// `format`: "auto" (by extension; a directory with system/controlDict is OpenFOAM) or a name of
+    /// the table inputFormats() (InputFormats.h; docs/inputs.md)
     std::string format = "auto";
     /// `voxel_size`: world units per voxel of a dense input (npy, raw; overrides a VTK file's
     /// spacing), > 0; null = the file's own, else 1. For a mesh: the lattice it is resampled

@@ -43,15 +43,6 @@ bool meshInputAvailable();
 /// An environment variable naming the mesh module's file, instead of where licvdb looks for it.
 inline constexpr const char* kMeshModuleEnv = "LICVDB_MESH_MODULE";
 
-/// The mesh formats: vtu, vts, vtm, vtpc, pvd, vtk-mesh (legacy unstructured/structured grid),
-/// plot3d, openfoam.
-inline bool isMeshFormat(const std::string& format)
-{
-    for (const char* f : {"vtu", "vts", "vtm", "vtpc", "pvd", "vtk-mesh", "plot3d", "openfoam"})
-        if (format == f) return true;
-    return false;
-}
-
 /// What a mesh file holds, without resampling it (`licvdb convert --list`).
 struct MeshSummary
 {
