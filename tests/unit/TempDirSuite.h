@@ -1,6 +1,7 @@
-// The set-up the bake suites share: a scratch directory of the suite's own under the system's
-// temporary directory, made before its first test and removed after its last, and analytic preset
-// fields written into it as .vdb files.
+// The set-up the test suites share: a scratch directory of the suite's own under the system's
+// temporary directory, made before its first test and removed after its last (TempDirSuite), or one
+// of each test's own, made before it and removed after it (TempDirTest); and analytic preset fields
+// written into it as .vdb files.
 #pragma once
 
 #include "vdbexport/io/AtomicWrite.h"
@@ -10,9 +11,14 @@
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>
 
+#include <atomic>
+#include <cctype>
 #include <filesystem>
+#include <iostream>
 #include <string>
 #include <system_error>
+#include <utility>
+#include <vector>
 
 #include <unistd.h>
 
@@ -72,6 +78,43 @@ protected:
     }
 
     static inline std::filesystem::path sDir;
+};
+
+/// A test with a scratch directory of its own, `mDir`. SetUp initializes OpenVDB and makes mDir =
+/// processTempDir("<suite>_<test>_<n>") afresh and empty but for the subdirectories named to the
+/// constructor (e.g. {"work", "logs"}); n counts the process's tests, so a --gtest_repeat run gets
+/// new ones, and characters other than letters and digits become '_'. TearDown removes it after a
+/// passing test and keeps it, naming it on stderr, after a failing one. A fixture whose SetUp does
+/// more calls TempDirTest::SetUp() first.
+class TempDirTest : public ::testing::Test
+{
+protected:
+    explicit TempDirTest(std::vector<std::string> subdirs = {}) : mSubdirs(std::move(subdirs)) {}
+
+    void SetUp() override
+    {
+        openvdb::initialize();
+        static std::atomic<int> counter{0};
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        std::string name = std::string(info->test_suite_name()) + "_" + info->name() + "_" + std::to_string(counter++);
+        for (char& c : name)
+            if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+        mDir = processTempDir(name);
+        std::filesystem::remove_all(mDir);
+        std::filesystem::create_directories(mDir);
+        for (const auto& sub : mSubdirs) std::filesystem::create_directories(mDir / sub);
+    }
+    void TearDown() override
+    {
+        std::error_code ec;
+        if (!HasFailure()) std::filesystem::remove_all(mDir, ec);
+        else std::cerr << "kept test directory " << mDir << "\n";
+    }
+
+    std::filesystem::path mDir;
+
+private:
+    std::vector<std::string> mSubdirs;
 };
 
 } // namespace lictest

@@ -2,6 +2,8 @@
 // (NaN policy, crop, mask, resample). Fixtures are written from C++ here, so every byte is known.
 #include <gtest/gtest.h>
 
+#include "TempDirSuite.h"
+
 #include "vdbexport/io/FieldInput.h"
 #include "vdbexport/io/AtomicWrite.h"
 
@@ -20,7 +22,6 @@
 #include <string>
 #include <vector>
 
-#include <unistd.h>
 
 namespace fs = std::filesystem;
 using namespace vdbexport;
@@ -138,29 +139,15 @@ std::string vti(const std::string& header, const std::string& arrays, const std:
         + "</VTKFile>\n";
 }
 
-class TempDir : public ::testing::Test
+class TempDir : public lictest::TempDirTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        mDir = fs::temp_directory_path() / ("licvdb_test_readers_" + std::to_string(::getpid()) + "_" + info->name());
-        fs::remove_all(mDir);
-        fs::create_directories(mDir);
-    }
-    void TearDown() override
-    {
-        std::error_code ec;
-        fs::remove_all(mDir, ec);
-    }
     std::string write(const std::string& name, const std::string& bytes)
     {
         const fs::path p = mDir / name;
         std::ofstream(p, std::ios::binary) << bytes;
         return p.string();
     }
-    fs::path mDir;
 };
 
 } // namespace

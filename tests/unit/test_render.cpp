@@ -4,6 +4,8 @@
 #include "lic/util/Error.h"
 #include "lic/render/Raycaster.h"
 
+#include "TempDirSuite.h"
+
 #include "vdbexport/io/ImageIO.h"
 #include "vdbexport/render/Render.h"
 
@@ -509,12 +511,9 @@ TEST(Render, RefusesBadInput)
 
 namespace {
 
-fs::path tempDir()
-{
-    const fs::path d = fs::temp_directory_path() / ("licvdb_test_render_" + std::to_string(::getpid()));
-    fs::create_directories(d);
-    return d;
-}
+/// Image and render-job tests write into a scratch directory of their own, `mDir`.
+class ImageIO : public lictest::TempDirTest {};
+class RenderJob : public lictest::TempDirTest {};
 
 lic::Image ramp()
 {
@@ -532,9 +531,9 @@ lic::Image ramp()
 
 } // namespace
 
-TEST(ImageIO, ExrIsSceneLinearAndRoundTrips)
+TEST_F(ImageIO, ExrIsSceneLinearAndRoundTrips)
 {
-    const fs::path dir = tempDir();
+    const fs::path dir = mDir;
     const std::string path = (dir / "a.exr").string();
     const lic::Image img = ramp();
     vdbexport::writeImageAtomic(path, img, {});
@@ -545,11 +544,10 @@ TEST(ImageIO, ExrIsSceneLinearAndRoundTrips)
     for (std::size_t i = 0; i < img.rgba.size(); ++i) EXPECT_EQ(back.rgba[i], img.rgba[i]) << i;
     EXPECT_EQ(cs, "lin_rec709_scene"); // OIIO 2.4 reads "Linear", 3.x "lin_rec709_scene"
     EXPECT_FALSE(fs::exists(path + ".tmp-" + std::to_string(::getpid())));
-    fs::remove_all(dir);
 }
 
 // OIIO 2.4 and 3.x name the same colour spaces differently; readImage reports one name.
-TEST(ImageIO, ColorSpaceNamesOfEveryOiioAreOne)
+TEST_F(ImageIO, ColorSpaceNamesOfEveryOiioAreOne)
 {
     for (const char* name : {"Linear", "linear", "lin_rec709", "lin_srgb", "lin_rec709_scene"})
         EXPECT_EQ(vdbexport::canonicalColorSpace(name), "lin_rec709_scene") << name;
@@ -559,9 +557,9 @@ TEST(ImageIO, ColorSpaceNamesOfEveryOiioAreOne)
     EXPECT_EQ(vdbexport::canonicalColorSpace(""), "");
 }
 
-TEST(ImageIO, PngGoesThroughTheOcioDisplayTransform)
+TEST_F(ImageIO, PngGoesThroughTheOcioDisplayTransform)
 {
-    const fs::path dir = tempDir();
+    const fs::path dir = mDir;
     vdbexport::DisplayTransform t;
     t.config = vdbexport::findOcioConfig();
     ASSERT_TRUE(fs::exists(t.config));
@@ -592,12 +590,11 @@ TEST(ImageIO, PngGoesThroughTheOcioDisplayTransform)
     bad.view = "Nope";
     EXPECT_THROW(vdbexport::toDisplay(img, bad), InputError);
     EXPECT_THROW(vdbexport::findOcioConfig((dir / "missing.ocio").string()), InputError);
-    fs::remove_all(dir);
 }
 
-TEST(ImageIO, AnimatedGifAndFailuresLeaveNoFile)
+TEST_F(ImageIO, AnimatedGifAndFailuresLeaveNoFile)
 {
-    const fs::path dir = tempDir();
+    const fs::path dir = mDir;
     vdbexport::DisplayTransform t;
     t.config = vdbexport::findOcioConfig();
     const std::string gif = (dir / "a.gif").string();
@@ -608,15 +605,14 @@ TEST(ImageIO, AnimatedGifAndFailuresLeaveNoFile)
     EXPECT_THROW(vdbexport::writeImageAtomic((dir / "a.bmpx").string(), ramp(), t), InputError);
     EXPECT_THROW(vdbexport::writeImageAtomic((dir / "no" / "a.png").string(), ramp(), t), InputError);
     EXPECT_FALSE(fs::exists(dir / "a.bmpx"));
-    fs::remove_all(dir);
 }
 
-TEST(RenderJob, SequenceAndImageNames)
+TEST_F(RenderJob, SequenceAndImageNames)
 {
     EXPECT_EQ(vdbexport::imageFramePath("out/a.png", 1, 1), "out/a.png");
     EXPECT_EQ(vdbexport::imageFramePath("out/a.png", 3, 24), "out/a_0003.png");
     EXPECT_EQ(vdbexport::imageFramePath("a.exr", 12, 24), "a_0012.exr");
-    const fs::path dir = tempDir();
+    const fs::path dir = mDir;
     for (int f = 1; f <= 3; ++f) std::ofstream(dir / ("s_000" + std::to_string(f) + ".vdb")) << "x";
     const auto files = vdbexport::renderInputs((dir / "s_0001.vdb").string(), 3);
     ASSERT_EQ(files.size(), 3u);
@@ -628,10 +624,9 @@ TEST(RenderJob, SequenceAndImageNames)
     ASSERT_EQ(fromManifest.size(), 2u);
     EXPECT_EQ(fromManifest[1], (dir / "s_0002.vdb").string());
     EXPECT_THROW(vdbexport::renderInputs((dir / "m.json").string(), 3), InputError);
-    fs::remove_all(dir);
 }
 
-TEST(RenderJob, CameraJsonReproducesTheCameraInBlenderTerms)
+TEST_F(RenderJob, CameraJsonReproducesTheCameraInBlenderTerms)
 {
     CameraSettings cs;
     cs.azimuth = 35;

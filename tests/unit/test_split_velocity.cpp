@@ -2,6 +2,8 @@
 // the split field is bit-identical to the bake of the same field stored as one vec3 grid, with
 // `--grid vel` and with the default grid choice (also `velocity.*`, `v.*`); components of
 // different voxel sizes are refused; a missing component is named.
+#include "TempDirSuite.h"
+
 #include "vdbexport/bake/Bake.h"
 #include "vdbexport/io/FieldInput.h"
 #include "vdbexport/io/AtomicWrite.h"
@@ -19,7 +21,6 @@
 #include <string>
 #include <vector>
 
-#include <unistd.h>
 
 namespace fs = std::filesystem;
 using openvdb::Vec3s;
@@ -91,23 +92,9 @@ void expectInputError(const std::function<void()>& fn, const std::vector<std::st
     }
 }
 
-class SplitVelocity : public ::testing::Test
+class SplitVelocity : public lictest::TempDirTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        mDir = fs::temp_directory_path() /
-               ("licvdb_test_split_" + std::to_string(::getpid()) + "_" +
-                ::testing::UnitTest::GetInstance()->current_test_info()->name());
-        fs::remove_all(mDir);
-        fs::create_directories(mDir);
-    }
-    void TearDown() override
-    {
-        std::error_code ec;
-        if (!HasFailure()) fs::remove_all(mDir, ec);
-    }
     std::string path(const std::string& name) const { return (mDir / name).string(); }
 
     /// A short noise bake of `field` (grid `grid`, "" = the default choice) into `out`.
@@ -123,8 +110,6 @@ protected:
         EXPECT_EQ(summary["field"]["grid"], grid.empty() ? "vel" : grid);
         return readDensity(r.output.path);
     }
-
-    fs::path mDir;
 };
 
 void expectBitIdentical(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b, const std::string& what)

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include "CpuTime.h"
+#include "TempDirSuite.h"
 #include "VdbMutants.h"
 #include "VdbSamples.h"
 
@@ -17,7 +18,6 @@
 
 #include <lic/util/Error.h>
 
-#include <atomic>
 #include <cerrno>
 #include <csignal>
 #include <chrono>
@@ -37,24 +37,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class VdbCheckTest : public ::testing::Test
-{
-protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        static std::atomic<int> counter{0};
-        mDir = fs::temp_directory_path() / ("licvdb_test_vdbcheck_" + std::to_string(::getpid()) + "_"
-                                            + std::to_string(counter++));
-        fs::create_directories(mDir);
-    }
-    void TearDown() override
-    {
-        std::error_code ec;
-        fs::remove_all(mDir, ec);
-    }
-    fs::path mDir;
-};
+using VdbCheckTest = lictest::TempDirTest;
 
 using vdb_mutants::inputErrorOf;
 using vdb_mutants::readFile;

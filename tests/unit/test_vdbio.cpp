@@ -2,6 +2,8 @@
 // messages for bad files, atomic writes, and `licvdb info`'s description.
 #include <gtest/gtest.h>
 
+#include "TempDirSuite.h"
+
 #include "vdbexport/io/Info.h"
 #include "vdbexport/io/AtomicWrite.h"
 #include "vdbexport/io/FieldGrids.h"
@@ -14,7 +16,6 @@
 
 #include <openvdb/openvdb.h>
 
-#include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -24,7 +25,6 @@
 #include <type_traits>
 #include <utility>
 
-#include <unistd.h>
 
 namespace fs = std::filesystem;
 using vdbexport::describeVdb;
@@ -36,24 +36,9 @@ using vdbexport::writeVdbAtomic;
 
 namespace {
 
-class VdbIOTest : public ::testing::Test
+class VdbIOTest : public lictest::TempDirTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        static std::atomic<int> counter{0};
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        mDir = fs::temp_directory_path()
-             / ("licvdb_test_vdbio_" + std::to_string(::getpid()) + "_" + std::to_string(counter++) + "_"
-                + info->name());
-        fs::create_directories(mDir);
-    }
-    void TearDown() override
-    {
-        std::error_code ec;
-        fs::remove_all(mDir, ec);
-    }
     std::string file(const std::string& name) const { return (mDir / name).string(); }
 
     /// Names of files in the test directory that contain ".tmp-".
@@ -65,8 +50,6 @@ protected:
                 out.push_back(e.path().filename().string());
         return out;
     }
-
-    fs::path mDir;
 };
 
 /// A Vec3 grid named `name` with a few distinct active values; the value at (i,j,k) is `f(i,j,k)`.
