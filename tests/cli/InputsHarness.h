@@ -4,12 +4,12 @@
 #pragma once
 
 #include "CliRun.h"
+#include "../unit/TempDirSuite.h"
 
 #include <gtest/gtest.h>
 
 #include <openvdb/openvdb.h>
 
-#include <atomic>
 #include <cctype>
 #include <cstdlib>
 #include <cstring>
@@ -20,8 +20,6 @@
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <unistd.h>
 
 namespace inputs_test {
 
@@ -77,31 +75,14 @@ inline openvdb::Vec3s swirl(int i, int j, int, int X, int Y)
     return openvdb::Vec3s(-y, x, 0.3f);
 }
 
-class InputsTest : public ::testing::Test
+class InputsTest : public lictest::TempDirTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        static std::atomic<int> counter{0};
-        std::string name = ::testing::UnitTest::GetInstance()->current_test_info()->name();
-        for (char& c : name)
-            if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
-        mRoot = fs::temp_directory_path()
-                / ("licvdb_test_inputs_" + std::to_string(::getpid()) + "_" + std::to_string(counter++) + "_" + name);
-        fs::remove_all(mRoot);
-        fs::create_directories(mRoot / "work");
-        fs::create_directories(mRoot / "logs");
-    }
-    void TearDown() override
-    {
-        std::error_code ec;
-        if (!HasFailure()) fs::remove_all(mRoot, ec);
-        else std::cerr << "kept test directory " << mRoot << "\n";
-    }
-    fs::path work(const std::string& name = "") const { return name.empty() ? mRoot / "work" : mRoot / "work" / name; }
+    InputsTest() : TempDirTest({"work", "logs"}) {}
 
-    RunResult runCommand(const std::string& command) { return cli_test::runShell(work(), mRoot / "logs", command); }
+    fs::path work(const std::string& name = "") const { return name.empty() ? mDir / "work" : mDir / "work" / name; }
+
+    RunResult runCommand(const std::string& command) { return cli_test::runShell(work(), mDir / "logs", command); }
 
     RunResult run(const std::vector<std::string>& args) { return runCommand(cli_test::licvdbCommand(args)); }
 
@@ -143,9 +124,6 @@ public:
         a.insert(a.end(), extra.begin(), extra.end());
         return a;
     }
-
-protected:
-    fs::path mRoot;
 };
 
 } // namespace inputs_test

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include "CliRun.h"
+#include "../unit/TempDirSuite.h"
 #include "vdbexport/io/Info.h"
 #include "vdbexport/io/AtomicWrite.h"
 #include "vdbexport/io/FieldGrids.h"
@@ -14,7 +15,6 @@
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
@@ -29,8 +29,6 @@
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <unistd.h>
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -116,34 +114,15 @@ openvdb::FloatGrid::Ptr readFloat(const fs::path& p, const std::string& name)
 
 /// Each test gets its own directory: `work` for inputs and outputs, `logs` for captured streams
 /// (kept apart so "no output file was created" checks only see what licvdb wrote).
-class CliTest : public ::testing::Test
+class CliTest : public lictest::TempDirTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        static std::atomic<int> counter{0};
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        std::string name = info->name();
-        for (char& c : name)
-            if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
-        mRoot = fs::temp_directory_path() /
-                ("licvdb_test_cli_" + std::to_string(::getpid()) + "_" + std::to_string(counter++) + "_" + name);
-        fs::remove_all(mRoot);
-        fs::create_directories(mRoot / "work");
-        fs::create_directories(mRoot / "logs");
-    }
-    void TearDown() override
-    {
-        std::error_code ec;
-        if (!HasFailure()) fs::remove_all(mRoot, ec);
-        else std::cerr << "kept test directory " << mRoot << "\n";
-    }
+    CliTest() : TempDirTest({"work", "logs"}) {}
 
-    fs::path work(const std::string& name = "") const { return name.empty() ? mRoot / "work" : mRoot / "work" / name; }
+    fs::path work(const std::string& name = "") const { return name.empty() ? mDir / "work" : mDir / "work" / name; }
 
     /// Run licvdb with `args` in the work directory; stdin is /dev/null, stdout and stderr are captured.
-    RunResult run(const std::vector<std::string>& args) { return cli_test::runLicvdb(work(), mRoot / "logs", args); }
+    RunResult run(const std::vector<std::string>& args) { return cli_test::runLicvdb(work(), mDir / "logs", args); }
 
     /// `licvdb field PRESET --res RES --out NAME` into the work directory; returns the path.
     fs::path makeField(const std::string& name, const std::string& preset = "abc", const std::string& res = "12,12,12")
@@ -172,8 +151,6 @@ protected:
             if (!e.is_directory()) out.insert(fs::relative(e.path(), work()).string());
         return out;
     }
-
-    fs::path mRoot;
 };
 
 // ---- 1. field → bake → info ------------------------------------------------------------------
@@ -982,7 +959,7 @@ TEST_F(CliTest, VdbPrintListsDensity)
     const fs::path field = makeField("abc.vdb");
     const fs::path out = work("lic.vdb");
     ASSERT_EQ(bake(field, out, {"--quiet"}).code, 0);
-    const RunResult r = cli_test::runShell(work(), mRoot / "logs", std::string(vdbPrint) + " " + cli_test::shellQuote(out.string()));
+    const RunResult r = cli_test::runShell(work(), mDir / "logs", std::string(vdbPrint) + " " + cli_test::shellQuote(out.string()));
     const std::string text = r.out + r.err;
     EXPECT_EQ(r.code, 0) << r.describe();
     EXPECT_NE(text.find("density"), std::string::npos) << text;

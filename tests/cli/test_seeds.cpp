@@ -6,13 +6,12 @@
 #include <gtest/gtest.h>
 
 #include "CliRun.h"
+#include "../unit/TempDirSuite.h"
 
 #include <nlohmann/json.hpp>
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 
-#include <atomic>
-#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -21,8 +20,6 @@
 #include <limits>
 #include <string>
 #include <vector>
-
-#include <unistd.h>
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -88,33 +85,19 @@ void expectBitIdentical(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b
 }
 
 /// Each test runs licvdb in its own directory (`work`), with a 16³ uniform flow v = (1, 0, 0).
-class SeedsTest : public ::testing::Test
+class SeedsTest : public lictest::TempDirTest
 {
 protected:
+    SeedsTest() : TempDirTest({"work", "logs"}) {}
     void SetUp() override
     {
-        openvdb::initialize();
-        static std::atomic<int> counter{0};
-        std::string name = ::testing::UnitTest::GetInstance()->current_test_info()->name();
-        for (char& c : name)
-            if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
-        mRoot = fs::temp_directory_path() /
-                ("licvdb_test_seeds_" + std::to_string(::getpid()) + "_" + std::to_string(counter++) + "_" + name);
-        fs::remove_all(mRoot);
-        fs::create_directories(mRoot / "work");
-        fs::create_directories(mRoot / "logs");
+        TempDirTest::SetUp();
         const RunResult r = run({"field", "uniform", "--res", "16,16,16", "--out", work("u.vdb"), "--quiet"});
         ASSERT_EQ(r.code, 0) << r.describe();
     }
-    void TearDown() override
-    {
-        std::error_code ec;
-        if (!HasFailure()) fs::remove_all(mRoot, ec);
-        else std::cerr << "kept test directory " << mRoot << "\n";
-    }
 
-    std::string work(const std::string& name) const { return (mRoot / "work" / name).string(); }
-    RunResult run(const std::vector<std::string>& args) { return cli_test::runLicvdb(mRoot / "work", mRoot / "logs", args); }
+    std::string work(const std::string& name) const { return (mDir / "work" / name).string(); }
+    RunResult run(const std::vector<std::string>& args) { return cli_test::runLicvdb(mDir / "work", mDir / "logs", args); }
     void writeFile(const std::string& name, const std::string& bytes) { std::ofstream(work(name), std::ios::binary) << bytes; }
 
     /// A spot bake of the uniform flow into `out` (length 6 output voxels, splat engine); `extra` appended.
@@ -136,8 +119,6 @@ protected:
         const json b = json::parse(r.out)["output_bbox"];
         box = openvdb::CoordBBox(openvdb::Coord(b[0][0], b[0][1], b[0][2]), openvdb::Coord(b[1][0], b[1][1], b[1][2]));
     }
-
-    fs::path mRoot;
 };
 
 TEST_F(SeedsTest, LinesRunThroughTheSeedsAndNowhereElse)
