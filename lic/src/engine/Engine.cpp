@@ -56,14 +56,20 @@ double gatherFieldReach(const LicSettings& settings, bool spots, double maxSpotR
     return out;
 }
 
+// The recipe's `lic` keys each engine reads (EngineInfo::keys). decay (exp kernel) and tolerance
+// (rk45) are read only under those choices, by every engine alike.
+constexpr std::string_view kNaiveKeys[] = {"kernel", "length", "step", "decay", "integrator", "tolerance", "brick"};
+constexpr std::string_view kFastKeys[] = {"kernel", "length", "step", "decay", "integrator", "tolerance", "min_hits", "brick"};
+constexpr std::string_view kSplatKeys[] = {"kernel", "length", "step", "decay", "integrator", "tolerance", "brick"};
+
 // The engine table.
 constexpr EngineInfo kEngines[] = {
-    {EngineType::Naive, kEngineNames[0].name.data(), "every voxel traces its own streamline (the reference; slow)", gatherBrickDim,
-     gatherSpotReach, gatherFieldReach, gatherNoiseBricks<NaiveEngine>, gatherSpotBricks<NaiveEngine>},
-    {EngineType::Fast, kEngineNames[1].name.data(), "fast-LIC: long streamlines deposit into every voxel they cross", gatherBrickDim,
-     gatherSpotReach, gatherFieldReach, gatherNoiseBricks<FastEngine>, gatherSpotBricks<FastEngine>},
+    {EngineType::Naive, kEngineNames[0].name.data(), "every voxel traces its own streamline (the reference; slow)", kNaiveKeys,
+     gatherBrickDim, gatherSpotReach, gatherFieldReach, gatherNoiseBricks<NaiveEngine>, gatherSpotBricks<NaiveEngine>},
+    {EngineType::Fast, kEngineNames[1].name.data(), "fast-LIC: long streamlines deposit into every voxel they cross", kFastKeys,
+     gatherBrickDim, gatherSpotReach, gatherFieldReach, gatherNoiseBricks<FastEngine>, gatherSpotBricks<FastEngine>},
     {EngineType::Splat, kEngineNames[2].name.data(), "spots only: one streamline per spot, its footprint splatted around it",
-     splatBrickDim, splatSpotReach, splatFieldReach, nullptr, splatSpotBricks},
+     kSplatKeys, splatBrickDim, splatSpotReach, splatFieldReach, nullptr, splatSpotBricks},
 };
 
 static_assert(std::size(kEngines) == std::size(kEngineNames));

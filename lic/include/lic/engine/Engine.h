@@ -4,8 +4,9 @@
 // asked here: no other layer re-derives an engine's geometry.
 //
 // Adding an engine: its files in lic/engine/, a value in EngineType (engine/Settings.h) and one
-// row of the table (src/engine/Engine.cpp); a gather engine (one that samples a texture along
-// streamlines, engine/Gather.h) also goes into GatherEngines there.
+// row of the table (src/engine/Engine.cpp), which also names the recipe keys it reads; a gather
+// engine (one that samples a texture along streamlines, engine/Gather.h) also goes into
+// GatherEngines there.
 #pragma once
 
 #include "lic/engine/Driver.h"
@@ -17,6 +18,7 @@
 
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace lic {
@@ -52,6 +54,10 @@ struct EngineInfo
     EngineType type;
     const char* name;
     const char* summary; ///< one line, for help texts
+    /// The recipe's `lic` keys this engine reads besides `engine`, by their recipe names
+    /// (docs/recipe.md): a bake refuses a recipe that sets any other (vdbexport's
+    /// bake/EngineKeys.cpp, which must know each name).
+    std::span<const std::string_view> keys;
     /// The brick edge when the settings do not set one (output voxels): a function of the
     /// settings only, never of the thread count, so the output never depends on the machine.
     int (*defaultBrick)(const LicSettings&);
