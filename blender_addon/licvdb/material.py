@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass, field
 
 from . import compat
+from . import grids as G
 
 #: Blender's colour ramp holds at most this many elements.
 MAX_RAMP_ELEMENTS = 32
@@ -75,12 +76,12 @@ def resolve_color_source(look: Look, grids) -> str:
     names = set(grids)
     src = look.color_source
     if src == "AUTO":
-        if "scalar" in names and look.colormap:
+        if G.SCALAR in names and look.colormap:
             return "SCALAR"
-        return "COLOR" if "color" in names else "WHITE"
-    if src == "SCALAR" and ("scalar" not in names or not look.colormap):
+        return "COLOR" if G.COLOR in names else "WHITE"
+    if src == "SCALAR" and (G.SCALAR not in names or not look.colormap):
         return "WHITE"
-    if src == "COLOR" and "color" not in names:
+    if src == "COLOR" and G.COLOR not in names:
         return "WHITE"
     return src
 
@@ -130,22 +131,22 @@ def build_lic_material(mat, grids, look: Look):
     # Emission per voxel of path: a line a few voxels across shines about ``brightness``
     # after its own absorption.
     emit_scale = look.brightness * inv_voxel
-    halos = look.mode == "HALOS" and "halo" in grids
+    halos = look.mode == "HALOS" and G.HALO in grids
     if halos:
         # Every line also sits behind its own halo shell, which the reference raycaster does not
         # count (its first halo segment is composited normally): scale the emission up by the
         # shell's transmittance so lines keep their brightness and only lines behind others dim.
         emit_scale *= math.exp(look.halo_strength * look.halo_shell)
 
-    density = _attribute(nodes, "density", (-700, 200))
+    density = _attribute(nodes, G.DENSITY, (-700, 200))
 
     # Colour.
     source = resolve_color_source(look, grids)
     ramp = None
     if source == "COLOR":
-        color_socket = _attribute(nodes, "color", (-700, 450)).outputs["Color"]
+        color_socket = _attribute(nodes, G.COLOR, (-700, 450)).outputs["Color"]
     elif source == "SCALAR":
-        scalar = _attribute(nodes, "scalar", (-700, 450))
+        scalar = _attribute(nodes, G.SCALAR, (-700, 450))
         ramp = nodes.new("ShaderNodeValToRGB")
         ramp.name = ramp.label = "colormap"
         ramp.location = (-450, 450)
@@ -185,7 +186,7 @@ def build_lic_material(mat, grids, look: Look):
     links.new(density.outputs["Fac"], line_abs.inputs[0])
     halo_shell = None
     if halos:
-        halo = _attribute(nodes, "halo", (-700, -200))
+        halo = _attribute(nodes, G.HALO, (-700, -200))
         shell = _math(nodes, "SUBTRACT", (-450, -200), clamp=True, name="halo minus line")
         links.new(halo.outputs["Fac"], shell.inputs[0])
         links.new(density.outputs["Fac"], shell.inputs[1])

@@ -10,6 +10,7 @@ from . import manifest as mf
 from mathutils import Matrix, Vector
 
 from . import check, compat, material, prefs, preview, props
+from . import grids as G
 
 
 #: (brightness, line absorption) for dense (noise) bakes; sparse line bakes keep the panel's
@@ -67,7 +68,7 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
         bpy.data.volumes.remove(vol)
         raise BakeImportError(f"Blender cannot read {first}: {msg}")
     loaded = [g.name for g in vol.grids]
-    if "density" not in loaded:
+    if G.DENSITY not in loaded:
         bpy.data.volumes.remove(vol)
         raise BakeImportError(f"{first} has no \"density\" grid (grids: {', '.join(loaded) or 'none'}); "
                               "is it a licvdb bake?")
@@ -105,7 +106,7 @@ def import_bake(context, path: str, frame_start: int | None = None, setup_render
         s.half_voxel_shift = True
         s.placement_shift = -0.5 * Vector(vs)
     with props.rebuild_suspended():  # one rebuild below, not one per property
-        s.look = "HALOS" if "halo" in loaded else "LINES"
+        s.look = "HALOS" if G.HALO in loaded else "LINES"
         if man and (man.recipe.get("input") or {}).get("type") == "noise":
             # Dense LIC fills its whole box: less emission and more absorption, so the streaks on
             # and just under the surface show instead of a glow summed through the volume.
@@ -129,9 +130,9 @@ def set_velocity_grid(vol, loaded) -> bool:
     """Make a bake's ``velocity`` grid (licvdb --write-velocity: world units per second, the flow
     or how a loop's lines travel) the volume's velocity, so Cycles motion blur streaks the lines
     along the flow. Returns whether it did (False when the bake has no such grid)."""
-    if "velocity" not in loaded or not compat.has_volume_velocity(vol):
+    if G.VELOCITY not in loaded or not compat.has_volume_velocity(vol):
         return False
-    vol.velocity_grid = "velocity"
+    vol.velocity_grid = G.VELOCITY
     vol.velocity_unit = "SECOND"
     vol.velocity_scale = 1.0
     return True

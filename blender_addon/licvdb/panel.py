@@ -5,6 +5,7 @@ in Properties > Object Data of a volume."""
 import bpy
 
 from . import compat, ops_bake, ops_bake_volume, prefs, presets
+from . import grids as G
 
 
 class LICVDB_PT_look(bpy.types.Panel):
@@ -29,7 +30,7 @@ class LICVDB_PT_look(bpy.types.Panel):
         row = col.row()
         row.enabled = s.look == "HALOS"
         row.prop(s, "halo_strength")
-        if s.look == "HALOS" and "halo" not in s.grid_names.split(","):
+        if s.look == "HALOS" and G.HALO not in s.grid_names.split(","):
             layout.label(text="This bake has no halo grid", icon="INFO")
         layout.prop(s, "color_source")
         mat = context.active_object.active_material

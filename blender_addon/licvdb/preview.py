@@ -21,6 +21,7 @@ import bpy
 
 from . import engine, material, prefs, props
 from . import manifest as mf
+from . import grids as G
 
 #: Name of the Volume to Mesh modifier that marks a preview object.
 MODIFIER = "licvdb preview"
@@ -71,7 +72,7 @@ def density_max(obj, recipe) -> float:
         proc = subprocess.run([exe, "info", "--json", path], capture_output=True, text=True, timeout=60,
                               stdin=subprocess.DEVNULL, env=engine.engine_env())
         grids = json.loads(proc.stdout).get("grids", [])
-        vmax = next(g["value_range"][1] for g in grids if g.get("name") == "density")
+        vmax = next(g["value_range"][1] for g in grids if g.get("name") == G.DENSITY)
     except (OSError, subprocess.TimeoutExpired, ValueError, StopIteration, KeyError, IndexError, TypeError):
         return 1.0
     return float(vmax) if vmax and vmax > 0 else 1.0
@@ -154,7 +155,7 @@ def create_preview(context, obj):
     pv.parent = obj  # identity local transform: drawn in the volume's own space, follows it
     mod = pv.modifiers.new(MODIFIER, "VOLUME_TO_MESH")
     mod.object = obj
-    mod.grid_name = "density"
+    mod.grid_name = G.DENSITY
     mod.resolution_mode = "GRID"  # the bake's own voxels: the surface lies on the lines
     mod.threshold = iso_level(obj)
     mod.adaptivity = ADAPTIVITY

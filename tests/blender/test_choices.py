@@ -32,3 +32,16 @@ def test_every_derived_scalar_is_offered_and_the_rest_are_fluid_grids():
     # The others are a smoke simulation's own float grids, which licvdb reads from the field file.
     assert set(offered) - set(c["scalars"]) == {"density", "temperature"}
     assert set(enum_ids("color_scalar")) == {"NONE", *offered}
+
+
+def test_the_grids_the_addon_reads_are_the_engines():
+    """Every grid the add-on reads (grids.py) is in licvdb's output-grid table with the same value
+    type, and every grid the table says the add-on uses is one it reads."""
+    from licvdb import grids
+
+    table = {g["name"]: g for g in engine_choices()["grids"]}
+    for name, value_type in grids.USED.items():
+        assert name in table, name
+        assert table[name]["type"] == value_type, (name, table[name]["type"])
+    used = {n for n, g in table.items() if g["blender"] != "not used"}
+    assert used == set(grids.USED), used ^ set(grids.USED)

@@ -261,6 +261,17 @@ const std::vector<BadCase>& cases()
              return InputsTest::bakeArgs(goodNpy(w), w / "r.vdb", {"--recipe", (w / "r.licvdb.json").string()});
          },
          {"overwrite", "recipe", "r.licvdb.json"}},
+        {"a lic key the engine does not read (--min-hits with splat)",
+         [](const fs::path& w) {
+             return InputsTest::bakeArgs(goodNpy(w), w / "out.vdb", {"--input", "spots", "--min-hits", "3"});
+         },
+         {"lic.min_hits", "\"splat\" engine", "does not use it", "it reads lic.kernel", "lic.brick", ": fast"}},
+        {"lic.decay with the box kernel in a recipe",
+         [](const fs::path& w) {
+             writeBytes(w / "decay.json", R"({"lic": {"engine": "naive", "decay": 0.8}})");
+             return InputsTest::bakeArgs(goodNpy(w), w / "out.vdb", {"--recipe", (w / "decay.json").string()});
+         },
+         {"lic.decay", "\"box\" kernel", "lic.kernel \"exp\""}},
     };
     return all;
 }

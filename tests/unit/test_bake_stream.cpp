@@ -63,8 +63,8 @@ protected:
         r.input.radii = {1.0, 1.5, 2.0};
         r.width = vdbexport::WidthSpec{"speed", std::nullopt, true};
         r.color = vdbexport::ColorSpec{"vorticity", "heated-object", std::nullopt};
-        r.output.writeTangent = true;
-        r.output.writeSeries = true;
+        r.output.grids.setKey("write_tangent", true);
+        r.output.grids.setKey("write_series", true);
         return r;
     }
 };
@@ -149,7 +149,7 @@ TEST_F(StreamBake, EveryGridIsBitIdenticalForOneToFourThreads)
         auto r = recipe("loop_t" + std::to_string(threads) + ".vdb");
         r.animation.frames = 4;
         r.color = vdbexport::ColorSpec{"speed", "viridis", std::nullopt};
-        r.output.writeTangent = true;
+        r.output.grids.setKey("write_tangent", true);
         r.threads = threads;
         const auto summary = vdbexport::bake(r);
         ASSERT_EQ(summary["files"].size(), 4u);
@@ -238,7 +238,7 @@ TEST_F(StreamBakeOneThread, OneThreadMeansNoWorkerInAnyStage)
     vdbexport::Recipe noise = recipe("t1_noise.vdb");
     noise.threads = 1;
     noise.animation.frames = 3;
-    noise.output.writeInput = true;
+    noise.output.grids.setKey("write_input", true);
     noise.color = vdbexport::ColorSpec{"helicity", "viridis", std::nullopt};
     {
         WorkerCounter counter;
@@ -280,7 +280,7 @@ TEST_F(StreamBake, SplatBakesAgreeWithNaiveAndKeepEveryFeature)
     // inside its halo.
     auto naive = spotRecipe("agree_naive.vdb");
     naive.lic.engine = "naive";
-    naive.output.writeTangent = naive.output.writeSeries = false;
+    naive.output.grids.setKey("write_tangent", false).setKey("write_series", false);
     naive.color.reset();
     vdbexport::bake(naive);
     auto splat = naive;
@@ -337,7 +337,7 @@ TEST_F(StreamBake, SplatBakesAgreeWithNaiveAndKeepEveryFeature)
     surface.input.surface = vdbexport::SurfaceSpec{"speed-gradient", 0.0};
     surface.input.radii = {1.0};
     surface.width.reset();
-    surface.output.writeSeries = false;
+    surface.output.grids.setKey("write_series", false);
     const auto s3 = vdbexport::bake(surface);
     EXPECT_GT(s3["spots"]["count"].get<int>(), 10);
     EXPECT_GT(s3["density_active_voxels"].get<int>(), 1000);
@@ -491,12 +491,12 @@ TEST_F(StreamBake, VelocityGridGivesTheMotionOfTheLines)
         }
     };
     auto still = spotRecipe("vel_still.vdb");
-    still.output.writeVelocity = true;
+    still.output.grids.setKey("write_velocity", true);
     vdbexport::bake(still);
     check(still.output.path, 0.0, "spot still");
 
     auto loop = spotRecipe("vel_loop.vdb");
-    loop.output.writeVelocity = true;
+    loop.output.grids.setKey("write_velocity", true);
     loop.animation.frames = 6;
     loop.field.fps = 30;
     vdbexport::bake(loop);
@@ -510,7 +510,7 @@ TEST_F(StreamBake, VelocityGridGivesTheMotionOfTheLines)
     for (int f = 1; f <= 6; ++f) check(vdbexport::framePath(loop.output.path, f, 6), cometSpeed, "comet loop frame " + std::to_string(f));
 
     auto noise = recipe("vel_noise.vdb");
-    noise.output.writeVelocity = true;
+    noise.output.grids.setKey("write_velocity", true);
     noise.animation.frames = 4;
     vdbexport::bake(noise);
     const double rippleSpeed = double(2 * s.halfSamples() + 1) * s.step / 4.0 * voxel * noise.field.fps;
@@ -587,8 +587,8 @@ TEST_F(StreamBake, SealedLeavesWriteTheFileWholeLeavesWrite)
         std::string bytes[2];
         auto r = spotRecipe(std::string("sealed") + (half ? "_half" : "") + ".vdb");
         r.output.half = half;
-        r.output.writeInput = true;
-        r.output.writeVelocity = true;
+        r.output.grids.setKey("write_input", true);
+        r.output.grids.setKey("write_velocity", true);
         for (const bool seal : {true, false}) {
             if (seal) ::unsetenv("LICVDB_SEAL_LEAVES");
             else ::setenv("LICVDB_SEAL_LEAVES", "0", 1);

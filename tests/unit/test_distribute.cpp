@@ -148,7 +148,7 @@ TEST_F(Distribute, APartOfTheFieldConvolvesItsBricksLikeTheWholeField)
                 r.input.type = "spots";
                 r.input.spacing = 5;
                 r.input.radii = {1.0, 2.0};
-                r.output.writeSeries = true;
+                r.output.grids.setKey("write_series", true);
             }
             const pipeline::Plan plan = pipeline::makePlan(r);
             const pipeline::FieldShare whole = pipeline::readFieldShare(plan, 0, 1);

@@ -143,7 +143,7 @@ TEST_F(HaloBake, WidthSeriesIsMonotonicAndTheCompositeFollowsTheScalar)
     auto r = spotRecipe("width.vdb");
     r.input.radii = {0.75, 1.25, 2.0};
     r.width = vdbexport::WidthSpec{"speed", sRoi, true}; // slow flow = wide lines
-    r.output.writeSeries = true;
+    r.output.grids.setKey("write_series", true);
     vdbexport::bake(r);
     const auto g = read("width.vdb");
     for (const char* name : {"density", "halo", "density_w1", "density_w2", "density_w3", "halo_w1", "halo_w2", "halo_w3"})
@@ -251,7 +251,7 @@ TEST_F(HaloBake, RecipeCombinationsThatMeanNothingAreRefused)
     r.input.radii = {1.0, 2.0};
     EXPECT_THROW(vdbexport::bake(r), lic::InputError); // levels nobody uses
     r.input.radii = {1, 2, 3, 4, 5};
-    r.output.writeSeries = true;
+    r.output.grids.setKey("write_series", true);
     EXPECT_THROW(vdbexport::bake(r), lic::InputError);
     auto n = spotRecipe("bad.vdb");
     n.input.type = "noise";

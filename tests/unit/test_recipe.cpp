@@ -150,8 +150,8 @@ TEST(Recipe, DesignExampleParses)
     EXPECT_EQ(r.field.grid, "velocity");
     EXPECT_EQ(r.output.path, "out.vdb");
     EXPECT_EQ(r.output.upsample, 2);
-    EXPECT_FALSE(r.output.writeInput);
-    EXPECT_FALSE(r.output.writeSeries);
+    EXPECT_FALSE(r.output.writes(lic::OutputGrid::Input));
+    EXPECT_FALSE(r.output.writes(lic::OutputGrid::LevelLines));
     EXPECT_EQ(r.input.type, "spots");
     EXPECT_EQ(r.input.distribution, "poisson");
     EXPECT_EQ(r.input.spacing, 6);

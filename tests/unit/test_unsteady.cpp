@@ -484,7 +484,7 @@ TEST_F(Unsteady, SealedSpotFramesWriteTheFilesWholeLeavesWrite)
     vdbexport::Recipe r = tornado("sealed.vdb", "spots");
     r.field.frames = std::array<int, 2>{2, 4};
     r.output.half = true;
-    r.output.writeTangent = true;
+    r.output.grids.setKey("write_tangent", true);
     std::vector<std::string> files[2];
     for (const bool seal : {true, false}) {
         if (seal) ::unsetenv("LICVDB_SEAL_LEAVES");
@@ -549,7 +549,7 @@ TEST_F(Unsteady, VelocityGridIsEachFramesOwnFlow)
     // --write-velocity on a sequence: frame n's `velocity` grid is frame n's flow (world units per
     // second), not frame 1's: the moving tornado's frames 2 and 7 differ, each matching its own field.
     auto r = tornado("vel.vdb", "spots");
-    r.output.writeVelocity = true;
+    r.output.grids.setKey("write_velocity", true);
     r.field.frames = std::array<int, 2>{2, 7};
     vdbexport::bake(r);
     double differ = 0;

@@ -7,6 +7,7 @@
 #include "vdbexport/io/FieldSequence.h"
 #include "vdbexport/io/Numbers.h"
 
+#include <lic/composite/OutputGrids.h>
 #include <lic/util/Error.h>
 
 #include <algorithm>
@@ -115,7 +116,7 @@ void BakeCommand::addColorFlags()
 void BakeCommand::addFieldFlags()
 {
     RecipeFlags& f = *mFlags;
-    f.option<std::string>("--format", "field.format", "Field format: auto|vdb|npy|vti|vtk|raw|vtu|vts|vtm|vtpc|pvd|vtk-mesh|plot3d|openfoam [auto: by extension]");
+    f.option<std::string>("--format", "field.format", "Field format: " + joined(choices().formats) + " [auto: by extension]");
     f.option<double>("--voxel-size", "field.voxel_size", "Dense inputs (npy, raw, vti, vtk): world units per voxel [file's, else 1]; meshes: the lattice's voxel size [median cell size]");
     f.option<double>("--time", "field.time", "A series (.pvd, OpenFOAM case): the time to read [the latest]");
     f.text("--solution", "field.solution", "PLOT3D: the solution (.q) file [the grid's name with .q]");
@@ -149,11 +150,14 @@ void BakeCommand::addFieldFlags()
 void BakeCommand::addOutputFlags()
 {
     RecipeFlags& f = *mFlags;
-    f.flag("--write-input", "output.write_input", "Also write the input texture as grid `input`");
-    f.flag("--write-tangent", "output.write_tangent", "Also write the unit flow direction as vec3s grid `tangent`");
-    f.flag("--write-velocity", "output.write_velocity",
-           "Also write vec3s grid `velocity` (world units per second: the flow, or how a loop's lines travel) "
-           "for motion blur");
+    // --write-input, --write-tangent, --write-velocity, --write-series: the output-grid table's
+    // grids asked for by a flag (a flag shared by two grids once).
+    std::vector<std::string_view> made;
+    for (const lic::OutputGridRow& row : lic::outputGrids()) {
+        if (row.flag.empty() || std::find(made.begin(), made.end(), row.flag) != made.end()) continue;
+        made.push_back(row.flag);
+        f.flag(std::string(row.flag), ("output." + std::string(row.recipeKey)).c_str(), std::string(row.help));
+    }
     f.flag("--half", "output.half", "Store grids as 16-bit half floats on disk (about half the file size)");
 }
 
@@ -191,7 +195,6 @@ void BakeCommand::addSpotFlags()
     f.needsSection("width", "--width-range needs --width SCALAR");
     f.flag("--width-invert", "width.invert", "--width: high scalar = thin lines (the seed shows slow flow wide)");
     f.needsSection("width", "--width-invert needs --width SCALAR");
-    f.flag("--write-series", "output.write_series", "Spots: also write density_w<k> and halo_w<k> for every width level");
 }
 
 int BakeCommand::run(Context& context)

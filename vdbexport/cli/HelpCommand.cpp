@@ -2,6 +2,9 @@
 #include "Command.h"
 #include "Allocator.h"
 
+#include "vdbexport/io/InputFormats.h"
+
+#include <lic/composite/OutputGrids.h>
 #include <lic/util/Error.h>
 
 #include <nlohmann/json.hpp>
@@ -12,6 +15,24 @@ namespace vdbexport::cli {
 
 namespace {
 
+/// The output-grid table (lic/composite/OutputGrids.h): what a bake can write.
+nlohmann::json outputGridsJson()
+{
+    static const char* const kWhen[] = {"always", "spots", "asked", "color"};
+    nlohmann::json out = nlohmann::json::array();
+    for (const lic::OutputGridRow& row : lic::outputGrids()) {
+        const std::string name(row.name);
+        nlohmann::json meta = nlohmann::json::array();
+        for (const auto& [key, value] : row.fixedMeta) meta.push_back({{"key", key}, {"value", value}});
+        out.push_back({{"name", row.perLevel ? name + "<k>" : name}, {"type", row.type},
+                       {"when", kWhen[std::size_t(row.when)]},
+                       {"recipe_key", row.recipeKey.empty() ? "" : "output." + std::string(row.recipeKey)},
+                       {"flag", row.flag}, {"help", row.help}, {"fill", row.fill}, {"metadata", row.metadata}, {"fixed_metadata", meta},
+                       {"blender", row.blender}, {"per_level", row.perLevel}, {"per_frame", row.perFrame}});
+    }
+    return out;
+}
+
 class HelpCommand final : public Command
 {
 public:
@@ -19,17 +40,21 @@ public:
     {
         cmd.add_option("command", mTopic, helpTopics(", "));
         cmd.add_flag("--json", mJson,
-                     "Print licvdb's choices as JSON: engines, kernels, spot distributions, derived scalars, colormaps "
-                     "(for programs, e.g. the Blender add-on's tests)");
+                     "Print licvdb's choices as JSON: engines, kernels, spot distributions, derived scalars, colormaps, "
+                     "input formats, output grids (for programs, e.g. the Blender add-on's tests)");
     }
 
     int run(Context& context) override
     {
         if (mJson) {
             const Choices c = choices();
-            const nlohmann::json j = {{"version", LICVDB_VERSION}, {"engines", c.engines}, {"kernels", c.kernels},
-                                      {"distributions", c.distributions}, {"scalars", c.scalars},
-                                      {"colormaps", c.colormaps}};
+            nlohmann::json j = {{"version", LICVDB_VERSION}, {"engines", c.engines}, {"kernels", c.kernels},
+                                {"distributions", c.distributions}, {"scalars", c.scalars}, {"colormaps", c.colormaps},
+                                {"formats", nlohmann::json::array()}};
+            for (const InputFormat& f : inputFormats())
+                j["formats"].push_back({{"name", f.name}, {"extensions", f.extensions}, {"kind", kindName(f.kind)},
+                                        {"description", f.description}});
+            j["grids"] = outputGridsJson();
             std::cout << j.dump(2) << "\n";
             return 0;
         }

@@ -43,7 +43,7 @@ Compositor::Compositor(const CompositeSettings& settings, CompositeInputs inputs
 {
     const CompositeSettings& s = mSettings;
     if (mInputs.color && !mInputs.colormap) throw InputError("colour by a scalar needs a colormap");
-    if (s.writeInput && !(s.spots ? mInputs.spots != nullptr : mInputs.noise != nullptr))
+    if (s.writes(OutputGrid::Input) && !(s.spots ? mInputs.spots != nullptr : mInputs.noise != nullptr))
         throw InputError("writing the input grid needs the input texture");
     const std::size_t blocks = domain.blockCount();
     if (!s.composesOnArrival()) {
@@ -56,21 +56,19 @@ Compositor::Compositor(const CompositeSettings& settings, CompositeInputs inputs
     } else {
         mStill.density.init(blocks);
         mStill.halo.init(blocks);
-        if (s.writeSeries) {
+        if (s.series()) {
             mStill.lines.resize(std::size_t(s.levels));
             mStill.halos.resize(std::size_t(s.levels));
             for (auto& set : mStill.lines) set.init(blocks);
             for (auto& set : mStill.halos) set.init(blocks);
         }
     }
-    if (s.writeInput) mInputLeaves.init(blocks);
-    if (s.writeTangent) mTangentLeaves.init(blocks);
-    if (s.writeVelocity) mVelocityLeaves.init(blocks);
-    if (mInputs.color) {
-        mColorLeaves.init(blocks);
-        mScalarLeaves.init(blocks);
+    for (const OutputGridRow& row : outputGrids()) {
+        if (row.perFrame || !writes(row)) continue;
+        if (row.type == "vec3s") vectors(row.id).init(blocks);
+        else floats(row.id).init(blocks);
     }
-    if (s.spots && s.writeInput) mInputSpots.emplace(*mInputs.spots, std::array<double, 1>{s.inputRadius}, s.haloScale);
+    if (s.spots && s.writes(OutputGrid::Input)) mInputSpots.emplace(*mInputs.spots, std::array<double, 1>{s.inputRadius}, s.haloScale);
     mMoments.assign(layout.size(), Moments{});
     for (int f = 1; f <= s.frames; ++f) mPhases.emplace_back(f, s.frames);
     for (int k = 0; k < s.levels; ++k) {
@@ -118,20 +116,39 @@ void Compositor::forEachStillSet(Fn&& fn)
     // The names and order of frame() for a still composed on arrival, then buildStatic()'s. Each
     // name is made only when asked for (sealLeaves), not on every brick's hand-over.
     int g = 0;
-    const auto named = [](const char* name) { return [name] { return std::string(name); }; };
-    fn(g++, named("density"), mStill.density);
-    fn(g++, named("halo"), mStill.halo);
+    const auto named = [](OutputGrid id, int level = 0) { return [id, level] { return outputGridName(id, level); }; };
+    fn(g++, named(OutputGrid::Density), mStill.density);
+    fn(g++, named(OutputGrid::Halo), mStill.halo);
     for (std::size_t k = 0; k < mStill.lines.size(); ++k) {
-        fn(g++, [k] { return "density_w" + std::to_string(k + 1); }, mStill.lines[k]);
-        fn(g++, [k] { return "halo_w" + std::to_string(k + 1); }, mStill.halos[k]);
+        fn(g++, named(OutputGrid::LevelLines, int(k + 1)), mStill.lines[k]);
+        fn(g++, named(OutputGrid::LevelHalos, int(k + 1)), mStill.halos[k]);
     }
-    if (mInputLeaves.enabled()) fn(g++, named("input"), mInputLeaves);
-    if (mTangentLeaves.enabled()) fn(g++, named("tangent"), mTangentLeaves);
-    if (mVelocityLeaves.enabled()) fn(g++, named("velocity"), mVelocityLeaves);
-    if (mColorLeaves.enabled()) {
-        fn(g++, named("color"), mColorLeaves);
-        fn(g++, named("scalar"), mScalarLeaves);
+    forEachShared([&](const OutputGridRow& row, auto& set) { fn(g++, named(row.id), set); });
+}
+
+template<typename Fn>
+void Compositor::forEachShared(Fn&& fn)
+{
+    for (const OutputGridRow& row : outputGrids()) {
+        if (row.perFrame) continue;
+        SharedLeaves& set = mShared[std::size_t(row.id)];
+        if (row.type == "vec3s") {
+            if (set.vectors.enabled()) fn(row, set.vectors);
+        } else if (set.floats.enabled()) {
+            fn(row, set.floats);
+        }
     }
+}
+
+bool Compositor::writes(const OutputGridRow& row) const
+{
+    switch (row.when) {
+    case GridWhen::Always: return true;
+    case GridWhen::Spots: return mSettings.spots;
+    case GridWhen::Asked: return mSettings.grids.has(row.id) && (!row.perLevel || mSettings.spots);
+    case GridWhen::ColorScalar: return bool(mInputs.color);
+    }
+    return false;
 }
 
 bool Compositor::sealLeaves(LeafSealer* sealer)
@@ -166,7 +183,7 @@ void Compositor::consumeBlock(const BrickChannels& bc, std::size_t i, Moments& m
     const std::size_t b = bc.brick->blocks[i];
     const openvdb::Coord origin = mDomain.blockOrigin(b);
     const int frames = s.frames;
-    const NoiseTexture* noise = (!s.spots && s.writeInput) ? &(*mInputs.noise)(*bc.brick) : nullptr;
+    const NoiseTexture* noise = (!s.spots && s.writes(OutputGrid::Input)) ? &(*mInputs.noise)(*bc.brick) : nullptr;
 
     // Spots composed on arrival (stills, comet loops): most voxels a footprint touches show in no
     // frame; rule them out from their largest raw value before looking up scalars and composing.
@@ -244,7 +261,7 @@ void Compositor::composeLoopBlock(const BrickChannels& bc, std::size_t i, LoopSt
     // Every frame of every candidate composed once, frame-major ([frame][value][candidate]); a
     // candidate is kept when line or halo shows in some frame, so every frame file has the same
     // topology.
-    const int frames = mSettings.frames, K = mSettings.levels, series = mSettings.writeSeries ? K : 0;
+    const int frames = mSettings.frames, K = mSettings.levels, series = mSettings.series() ? K : 0;
     const std::size_t nc = stage.candidates, per = std::size_t(loopValues());
     stage.values.resize(std::size_t(frames) * per * nc);
     std::fill_n(stage.shows.begin(), nc, std::uint8_t(0));
@@ -347,9 +364,12 @@ bool Compositor::keepSpotVoxel(const Raw& raw, float widthT, float roi, std::siz
 void Compositor::addStatic(std::size_t b, const openvdb::Coord& origin, openvdb::Index off, const openvdb::Coord& ijk,
                            const NoiseTexture* noise)
 {
-    const bool needWorld = mTangentLeaves.enabled() || mVelocityLeaves.enabled() || bool(mInputs.color);
+    auto& input = floats(OutputGrid::Input);
+    auto& tangent = vectors(OutputGrid::Tangent);
+    auto& velocity = vectors(OutputGrid::Velocity);
+    const bool needWorld = tangent.enabled() || velocity.enabled() || bool(mInputs.color);
     const openvdb::Vec3d world = needWorld ? mDomain.worldOf(ijk) : openvdb::Vec3d(0.0);
-    if (mInputLeaves.enabled()) {
+    if (input.enabled()) {
         float v = 0.0f;
         if (noise) {
             v = noise->voxel(ijk);
@@ -359,9 +379,9 @@ void Compositor::addStatic(std::size_t b, const openvdb::Coord& origin, openvdb:
             mInputSpots->sample(ijk.asVec3d(), s);
             v = std::min(s[0], 1.0f);
         }
-        mInputLeaves.leaf(b, origin).setValueOn(off, v);
+        input.leaf(b, origin).setValueOn(off, v);
     }
-    if (mTangentLeaves.enabled()) {
+    if (tangent.enabled()) {
         // Unit flow direction at the voxel centre (zero at critical points), for illuminated lines
         // in renderers.
         openvdb::Vec3s t(0.0f);
@@ -370,9 +390,9 @@ void Compositor::addStatic(std::size_t b, const openvdb::Coord& origin, openvdb:
             const double len = v.length();
             if (len > mField.maxSpeed() * 1e-6) t = openvdb::Vec3s(v / len);
         }
-        mTangentLeaves.leaf(b, origin).setValueOn(off, t);
+        tangent.leaf(b, origin).setValueOn(off, t);
     }
-    if (mVelocityLeaves.enabled()) {
+    if (velocity.enabled()) {
         // How the lines move here (world units per second): a loop's pattern along the unit flow
         // direction at its one speed, else the flow itself.
         openvdb::Vec3d v(0.0), out(0.0);
@@ -384,12 +404,12 @@ void Compositor::addStatic(std::size_t b, const openvdb::Coord& origin, openvdb:
                 out = v * mSettings.velocityScale;
             }
         }
-        mVelocityLeaves.leaf(b, origin).setValueOn(off, openvdb::Vec3s(out));
+        velocity.leaf(b, origin).setValueOn(off, openvdb::Vec3s(out));
     }
     if (mInputs.color) {
         const double t = unitOf(mInputs.color.at(world), mSettings.colorRange);
-        mScalarLeaves.leaf(b, origin).setValueOn(off, float(t));
-        mColorLeaves.leaf(b, origin).setValueOn(off, openvdb::Vec3s(mInputs.colormap->linear(t)));
+        floats(OutputGrid::Scalar).leaf(b, origin).setValueOn(off, float(t));
+        vectors(OutputGrid::Color).leaf(b, origin).setValueOn(off, openvdb::Vec3s(mInputs.colormap->linear(t)));
     }
 }
 
@@ -482,13 +502,13 @@ openvdb::GridPtrVec Compositor::frame(int f)
     openvdb::GridPtrVec grids;
     auto addLevels = [&](std::vector<LeafSet<openvdb::FloatGrid>>& lines, std::vector<LeafSet<openvdb::FloatGrid>>& halos) {
         for (int k = 0; k < int(lines.size()); ++k) {
-            grids.push_back(lines[std::size_t(k)].release(mDomain, "density_w" + std::to_string(k + 1)));
-            grids.push_back(halos[std::size_t(k)].release(mDomain, "halo_w" + std::to_string(k + 1)));
+            grids.push_back(lines[std::size_t(k)].release(mDomain, outputGridName(OutputGrid::LevelLines, k + 1)));
+            grids.push_back(halos[std::size_t(k)].release(mDomain, outputGridName(OutputGrid::LevelHalos, k + 1)));
         }
     };
     if (mSettings.composesOnArrival() && frames == 1) {
-        grids.push_back(mStill.density.release(mDomain, "density"));
-        grids.push_back(mStill.halo.release(mDomain, "halo"));
+        grids.push_back(mStill.density.release(mDomain, outputGridName(OutputGrid::Density)));
+        grids.push_back(mStill.halo.release(mDomain, outputGridName(OutputGrid::Halo)));
         addLevels(mStill.lines, mStill.halos);
         mStill = SpotFrame{};
     } else {
@@ -498,7 +518,7 @@ openvdb::GridPtrVec Compositor::frame(int f)
         density.init(blocks);
         if (spots) {
             halo.init(blocks);
-            if (mSettings.writeSeries) {
+            if (mSettings.series()) {
                 lines.resize(std::size_t(K));
                 halos.resize(std::size_t(K));
                 for (auto& s : lines) s.init(blocks);
@@ -508,11 +528,11 @@ openvdb::GridPtrVec Compositor::frame(int f)
         if (mSettings.composesOnArrival()) composeLoopLeaves(f, density, halo, lines, halos);
         else composeLeaves(f, density, halo, lines, halos);
         if (!spots && last && frames == 1) {
-            grids.push_back(mRawLeaves[0].release(mDomain, "density"));
+            grids.push_back(mRawLeaves[0].release(mDomain, outputGridName(OutputGrid::Density)));
         } else {
-            grids.push_back(density.release(mDomain, "density"));
+            grids.push_back(density.release(mDomain, outputGridName(OutputGrid::Density)));
             if (spots) {
-                grids.push_back(halo.release(mDomain, "halo"));
+                grids.push_back(halo.release(mDomain, outputGridName(OutputGrid::Halo)));
                 addLevels(lines, halos);
             }
         }
@@ -532,22 +552,16 @@ void Compositor::buildStatic()
 {
     if (mStaticBuilt) return;
     mStaticBuilt = true;
-    if (mInputLeaves.enabled()) mStatic.push_back(mInputLeaves.release(mDomain, "input"));
-    if (mTangentLeaves.enabled()) mStatic.push_back(mTangentLeaves.release(mDomain, "tangent"));
-    if (mVelocityLeaves.enabled()) {
-        auto velocity = mVelocityLeaves.release(mDomain, "velocity");
-        velocity->setVectorType(openvdb::VEC_CONTRAVARIANT_RELATIVE);
-        velocity->insertMeta("licvdb_velocity_unit", openvdb::StringMetadata("world units per second"));
-        if (mSettings.velocitySpeed > 0)
-            velocity->insertMeta("licvdb_loop_speed", openvdb::DoubleMetadata(mSettings.velocitySpeed));
-        mStatic.push_back(velocity);
-    }
-    if (mColorLeaves.enabled()) {
-        auto color = mColorLeaves.release(mDomain, "color");
-        color->insertMeta("licvdb_color_space", openvdb::StringMetadata("scene-linear Rec.709"));
-        mStatic.push_back(color);
-        mStatic.push_back(mScalarLeaves.release(mDomain, "scalar"));
-    }
+    forEachShared([&](const OutputGridRow& row, auto& set) {
+        auto grid = set.release(mDomain, std::string(row.name));
+        if constexpr (std::is_same_v<std::decay_t<decltype(set)>, LeafSet<openvdb::Vec3SGrid>>)
+            grid->setVectorType(row.vecType);
+        for (const auto& [key, value] : row.fixedMeta)
+            grid->insertMeta(std::string(key), openvdb::StringMetadata(std::string(value)));
+        if (row.id == OutputGrid::Velocity && mSettings.velocitySpeed > 0)
+            grid->insertMeta("licvdb_loop_speed", openvdb::DoubleMetadata(mSettings.velocitySpeed));
+        mStatic.push_back(grid);
+    });
 }
 
 } // namespace lic

@@ -56,7 +56,7 @@ lic::CompositeInputs compositeInputs(const Plan& plan, lic::ScalarSet& scalars, 
     if (plan.roiPost) in.roi = lic::ScalarField(scalars.get(r.roi->scalar));
     if (r.color) in.color = lic::ScalarField(scalars.get(r.color->scalar));
     in.colormap = cmap;
-    if (r.output.writeInput) {
+    if (r.output.writes(lic::OutputGrid::Input)) {
         if (plan.spots) in.spots = &input.spots;
         else in.noise = input.noise.get();
     }
@@ -119,10 +119,7 @@ lic::CompositeSettings compositeSettings(const Plan& plan, const Ranges& ranges)
     s.widthRange = ranges.width;
     if (plan.roiPost) s.roiRange = r.roi->range;
     s.colorRange = ranges.color;
-    s.writeInput = r.output.writeInput;
-    s.writeTangent = r.output.writeTangent;
-    s.writeVelocity = r.output.writeVelocity;
-    s.writeSeries = r.output.writeSeries;
+    s.grids = r.output.grids;
     s.inputRadius = r.input.radii.empty() ? 1.0 : r.input.radii[0];
     s.haloScale = r.input.haloScale;
     s.threads = plan.settings.threads;
@@ -207,11 +204,11 @@ void FrameBake::makeTexture(const FrameOptions& options)
     spotCount = mPlan.spots ? mJob.sumAll(input.spotCount, "making the input texture") : 0;
     mJob.stage("preparing the compositor", [&] {
         lic::CompositeSettings cs = compositeSettings(mPlan, ranges);
-        if (cs.writeVelocity && mPlan.frames > 1) {
+        if (cs.writes(lic::OutputGrid::Velocity) && mPlan.frames > 1) {
             // A loop's lines travel along the flow at one speed: output voxels per frame × voxel
             // size × frames per second.
             cs.velocitySpeed = loopVoxelsPerFrame(mPlan) * domain().voxelSize() * mPlan.recipe.field.fps;
-        } else if (cs.writeVelocity && options.velocityScale) {
+        } else if (cs.writes(lic::OutputGrid::Velocity) && options.velocityScale) {
             cs.velocityScale = options.velocityScale(share);
         }
         compositor.emplace(std::move(cs),

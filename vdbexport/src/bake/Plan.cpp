@@ -28,11 +28,13 @@ void checkSupported(const Recipe& r)
     } catch (const lic::InputError& e) {
         throw lic::InputError(std::string("lic.engine (--engine): ") + e.what());
     }
+    checkEngineKeys(r);
     if (!spots && r.width) {
         throw lic::InputError("width needs spot input (input.type \"spots\", --input spots): line width "
                               "comes from the spot radii input.radii");
     }
-    if (!spots && r.output.writeSeries) {
+    const bool series = r.output.writes(lic::OutputGrid::LevelLines);
+    if (!spots && series) {
         throw lic::InputError("output.write_series (--write-series) needs spot input (input.type \"spots\")");
     }
     if (!spots && r.input.surface) {
@@ -45,7 +47,7 @@ void checkSupported(const Recipe& r)
         throw lic::InputError("input.radii has " + std::to_string(r.input.radii.size()) +
                               " radii; at most 4 width levels are supported");
     }
-    if (spots && r.input.radii.size() > 1 && !r.width && !r.output.writeSeries) {
+    if (spots && r.input.radii.size() > 1 && !r.width && !series) {
         throw lic::InputError("input.radii has " + std::to_string(r.input.radii.size()) +
                               " radii but nothing uses the wider levels: add a width scalar (width.scalar, "
                               "--width SCALAR) or output.write_series (--write-series), or give one radius");

@@ -32,4 +32,10 @@ struct Plan
 /// bake. @throw lic::InputError naming the first problem.
 Plan makePlan(const Recipe& recipe);
 
+/// Refuse `lic` keys set to other than their defaults that nothing will read: keys the chosen
+/// engine (for "auto", the one it picks) does not read (lic::EngineInfo::keys), lic.decay without
+/// the exp kernel, lic.tolerance without rk45 (bake/EngineKeys.cpp; makePlan() calls it).
+/// @throw lic::InputError naming the keys, the engine and the keys it reads.
+void checkEngineKeys(const Recipe& recipe);
+
 } // namespace vdbexport::pipeline

@@ -2,6 +2,7 @@
 // JSON keys and members; the same table drives the key check, parsing and serialisation,
 // so the three cannot drift apart.
 #include "vdbexport/bake/Recipe.h"
+#include "vdbexport/io/InputFormats.h"
 
 #include "lic/engine/Engine.h"
 #include "lic/engine/Settings.h"
@@ -116,9 +117,7 @@ template <> struct Schema<OutputSpec>
     static auto fields()
     {
         return std::make_tuple(field("path", &OutputSpec::path), field("upsample", &OutputSpec::upsample),
-            field("write_input", &OutputSpec::writeInput), field("write_series", &OutputSpec::writeSeries),
-            field("contrast", &OutputSpec::contrast), field("write_tangent", &OutputSpec::writeTangent),
-            field("half", &OutputSpec::half), field("write_velocity", &OutputSpec::writeVelocity));
+            field("contrast", &OutputSpec::contrast), field("half", &OutputSpec::half));
     }
 };
 template <> struct Schema<SurfaceSpec>
@@ -191,11 +190,35 @@ template <> struct Schema<Recipe>
 template <class T>
 concept Described = requires { Schema<T>::fields(); };
 
+/// Keys a struct reads from a table of its own rather than from its Schema: none by default.
+template <class T> struct TableKeys
+{
+    static std::vector<std::string> keys() { return {}; }
+    static bool get(const T&, const std::string&) { return false; }
+    static void set(T&, const std::string&, bool) {}
+};
+
+/// `output.write_*`: one boolean per recipe key of the output-grid table.
+template <> struct TableKeys<OutputSpec>
+{
+    static std::vector<std::string> keys()
+    {
+        std::vector<std::string> keys;
+        for (const lic::OutputGridRow& row : lic::outputGrids())
+            if (!row.recipeKey.empty() && std::find(keys.begin(), keys.end(), row.recipeKey) == keys.end())
+                keys.emplace_back(row.recipeKey);
+        return keys;
+    }
+    static bool get(const OutputSpec& o, const std::string& key) { return o.grids.hasKey(key); }
+    static void set(OutputSpec& o, const std::string& key, bool on) { o.grids.setKey(key, on); }
+};
+
 template <Described T>
 std::vector<std::string> keysOf()
 {
     std::vector<std::string> keys;
     std::apply([&](auto... f) { (keys.emplace_back(f.key), ...); }, Schema<T>::fields());
+    for (std::string& key : TableKeys<T>::keys()) keys.push_back(std::move(key));
     return keys;
 }
 
@@ -361,6 +384,13 @@ void read(const json& j, const Where& w, T& out)
                 ...);
         },
         Schema<T>::fields());
+    for (const std::string& key : TableKeys<T>::keys()) {
+        if (const auto it = j.find(key); it != j.end()) {
+            bool on = false;
+            read(*it, w / key, on);
+            TableKeys<T>::set(out, key, on);
+        }
+    }
 }
 
 /// null = absent; an object is merged onto the section's defaults.
@@ -416,6 +446,7 @@ json write(const T& v)
 {
     json j = json::object();
     std::apply([&](auto... f) { ((j[f.key] = write(v.*(f.member))), ...); }, Schema<T>::fields());
+    for (const std::string& key : TableKeys<T>::keys()) j[key] = TableKeys<T>::get(v, key);
     return j;
 }
 
@@ -673,7 +704,7 @@ const std::vector<std::string>& allowedValues(const std::string& keyPath)
         {"input.noise_filter", lic::listedNames(lic::noiseFilterNames())},
         {"roi.mode", {"pre", "post"}},
         {"output.contrast", {"stretch", "none"}},
-        {"field.format", {"auto", "vdb", "npy", "vti", "vtk", "raw", "vtu", "vts", "vtm", "vtpc", "pvd", "vtk-mesh", "plot3d", "openfoam"}},
+        {"field.format", inputFormatValues()},
         {"field.dtype", {"float32", "float64", "f4", "f8", "<f4", "<f8", ">f4", ">f8"}},
         {"field.mask", {"none", "zero"}},
         {"field.nan_policy", {"refuse", "zero"}},

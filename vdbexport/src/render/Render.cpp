@@ -7,6 +7,7 @@
 #include "vdbexport/io/VdbReader.h"
 
 #include <lic/composite/Colormap.h>
+#include <lic/composite/OutputGrids.h>
 #include <lic/util/Error.h>
 
 #include <openvdb/openvdb.h>
@@ -73,17 +74,28 @@ LoadedVolume loadVolume(const std::string& path, bool wantHalo, bool wantScalar,
             if (n == name) return t;
         return "";
     };
-    const std::string dt = typeOf("density");
+    using lic::OutputGrid;
+    const std::string density = lic::outputGridName(OutputGrid::Density);
+    const std::string dt = typeOf(density);
     if (dt.empty())
         throw lic::InputError(q(path) + " has no `density` grid (it has " + detail::listGrids(out.gridTypes) +
                               "); expected a licvdb bake with a float grid `density`");
-    out.volume.density = readFloat(reader, path, "density", dt);
+    out.volume.density = readFloat(reader, path, density, dt);
+    // The optional grids the renderer reads, each when present and wanted.
+    auto floatGrid = [&](OutputGrid id, bool want, openvdb::FloatGrid::ConstPtr& to) {
+        const std::string name = lic::outputGridName(id);
+        if (want && !typeOf(name).empty()) to = readFloat(reader, path, name, typeOf(name));
+    };
+    auto vecGrid = [&](OutputGrid id, bool want, openvdb::Vec3SGrid::ConstPtr& to) {
+        const std::string name = lic::outputGridName(id);
+        if (want && !typeOf(name).empty()) to = readVec3(reader, path, name, typeOf(name));
+    };
     // Always read `halo` when present: with --halos off it still marks a line bake (auto density scale).
-    if (wantHalo && !typeOf("halo").empty()) out.volume.halo = readFloat(reader, path, "halo", typeOf("halo"));
+    floatGrid(OutputGrid::Halo, wantHalo, out.volume.halo);
     // A colormap over `scalar` replaces `color`: do not read it then.
-    if (!wantScalar && !typeOf("color").empty()) out.volume.color = readVec3(reader, path, "color", typeOf("color"));
-    if (wantScalar && !typeOf("scalar").empty()) out.volume.scalar = readFloat(reader, path, "scalar", typeOf("scalar"));
-    if (wantTangent && !typeOf("tangent").empty()) out.volume.tangent = readVec3(reader, path, "tangent", typeOf("tangent"));
+    vecGrid(OutputGrid::Color, !wantScalar, out.volume.color);
+    floatGrid(OutputGrid::Scalar, wantScalar, out.volume.scalar);
+    vecGrid(OutputGrid::Tangent, wantTangent, out.volume.tangent);
     return out;
 }
 

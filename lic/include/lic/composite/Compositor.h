@@ -11,6 +11,7 @@
 #include "lic/composite/Colormap.h"
 #include "lic/composite/Contrast.h"
 #include "lic/composite/LeafSet.h"
+#include "lic/composite/OutputGrids.h"
 #include "lic/engine/Driver.h"
 #include "lic/field/Bricks.h"
 #include "lic/field/Field.h"
@@ -51,20 +52,22 @@ struct CompositeSettings
     std::array<double, 2> widthRange{0, 1}; ///< width scalar mapped onto narrowest … widest
     std::array<double, 2> roiRange{0, 1};   ///< ROI post-mask: kept range
     std::array<double, 2> colorRange{0, 1}; ///< colour scalar mapped onto the colormap
-    bool writeInput = false;   ///< grid `input`: the input texture
-    bool writeTangent = false; ///< grid `tangent`: the unit flow direction
-    /// Grid `velocity`: how the lines move, world units per second, for renderers' motion blur.
-    bool writeVelocity = false;
-    /// With writeVelocity: > 0 = the unit flow direction times this speed (a loop: the speed at
+    /// The grids asked for (OutputGrids.h, GridWhen::Asked): `input` (the input texture),
+    /// `tangent` (the unit flow direction), `velocity` (how the lines move, world units per
+    /// second, for renderers' motion blur), each level's `density_w<k>` / `halo_w<k>` (spots).
+    OutputGridSet grids;
+    /// With the velocity grid: > 0 = the unit flow direction times this speed (a loop: the speed at
     /// which its comets or ripples travel); 0 = the field's own velocity times velocityScale (a
     /// still, or one frame of an unsteady sequence).
     double velocitySpeed = 0.0;
     double velocityScale = 1.0;
-    bool writeSeries = false;  ///< spots: grids density_w<k> / halo_w<k> for every level
     double inputRadius = 1.0;  ///< spots' `input` grid: the narrowest line radius (output voxels)
     double haloScale = 2.0;
     int threads = 0;           ///< compositing a loop's frames (0 = all cores)
 
+    bool writes(OutputGrid g) const { return grids.has(g); }
+    /// Spots: each level's lines and halos are written (`density_w<k>`, `halo_w<k>`).
+    bool series() const { return grids.has(OutputGrid::LevelLines); }
     /// Texture channels C: 1 for noise, 2K for spots.
     int textureChannels() const { return spots ? 2 * levels : 1; }
     /// Spot stills and comet loops compose their frames as the bricks arrive.
@@ -84,8 +87,8 @@ struct CompositeInputs
     ScalarField roi;     ///< region of interest, post-mask
     ScalarField color;   ///< colour scalar (needs `colormap`)
     const Colormap* colormap = nullptr;
-    NoiseBrickSource* noise = nullptr; ///< noise bakes with writeInput: the bricks' noise
-    const SpotSet* spots = nullptr;    ///< spot bakes with writeInput: the spots
+    NoiseBrickSource* noise = nullptr; ///< noise bakes writing `input`: the bricks' noise
+    const SpotSet* spots = nullptr;    ///< spot bakes writing `input`: the spots
 };
 
 class Compositor
@@ -113,8 +116,8 @@ public:
     /// Statistics of the raw frame-1 density over the active voxels (noise bakes).
     const ChannelStats& rawStats() const { return mRaw; }
 
-    /// The grids of frame f (1-based) in file order: density (+ halo and, with writeSeries, each
-    /// level's lines and halos), then input, tangent, color, scalar. The static grids are built on
+    /// The grids of frame f (1-based) in file order (OutputGrids.h): density (+ halo and, with
+    /// the level series, each level's lines and halos), then the grids every frame shares. The static grids are built on
     /// the first call and shared by every frame. The last frame takes the per-voxel data over in
     /// place, so call frames in order 1 … N.
     openvdb::GridPtrVec frame(int f);
@@ -155,20 +158,29 @@ private:
     /// A comet loop: every frame of the stage's candidates composed, a frame at a time.
     void composeLoopBlock(const BrickChannels& bc, std::size_t i, LoopStage& stage) const;
     /// Values per voxel and frame of a comet loop: density, halo (+ each level's line and halo).
-    int loopValues() const { return 2 + (mSettings.writeSeries ? 2 * mSettings.levels : 0); }
+    int loopValues() const { return 2 + (mSettings.series() ? 2 * mSettings.levels : 0); }
     /// Store the shown candidates' values of a consumed block in mLoopBlocks[b].
     void keepLoopBlock(std::size_t b, const LoopStage& stage);
     /// A comet loop's frame f leaves (density, halo, levels) from mLoopBlocks, on every core.
     void composeLoopLeaves(int f, LeafSet<openvdb::FloatGrid>& density, LeafSet<openvdb::FloatGrid>& halo,
                            std::vector<LeafSet<openvdb::FloatGrid>>& lines,
                            std::vector<LeafSet<openvdb::FloatGrid>>& halos);
-    /// The grids every frame shares (input, tangent, colour, scalar) at one voxel.
+    /// The grids every frame shares (input, tangent, velocity, colour, scalar) at one voxel: each
+    /// grid's fill.
     void addStatic(std::size_t b, const openvdb::Coord& origin, openvdb::Index off, const openvdb::Coord& ijk,
                    const NoiseTexture* noise);
     /// A loop frame's (or a noise still's) density and halo leaves, composed from the kept channels.
     void composeLeaves(int f, LeafSet<openvdb::FloatGrid>& density, LeafSet<openvdb::FloatGrid>& halo,
                        std::vector<LeafSet<openvdb::FloatGrid>>& lines, std::vector<LeafSet<openvdb::FloatGrid>>& halos);
     void buildStatic();
+    /// Whether this bake writes grid `row`.
+    bool writes(const OutputGridRow& row) const;
+    /// fn(row, set) for each grid every frame shares that this bake writes, in file order, while
+    /// its leaves are held (before buildStatic()).
+    template<typename Fn>
+    void forEachShared(Fn&& fn);
+    LeafSet<openvdb::FloatGrid>& floats(OutputGrid g) { return mShared[std::size_t(g)].floats; }
+    LeafSet<openvdb::Vec3SGrid>& vectors(OutputGrid g) { return mShared[std::size_t(g)].vectors; }
     /// fn(index, name, set) for each grid of a spot still composed on arrival, in frame(1)'s order:
     /// the grids sealLeaves() seals. `name()` makes the grid's name (a string) when called.
     template<typename Fn>
@@ -178,12 +190,12 @@ private:
     CompositeInputs mInputs;
     const VelocityField& mField;
     const OutputDomain& mDomain;
-    std::optional<SpotTexture<1>> mInputSpots; // writeInput of a spot bake
+    std::optional<SpotTexture<1>> mInputSpots; // the `input` grid of a spot bake
 
     // Per-voxel data kept until the frames are written.
     std::vector<LeafSet<openvdb::FloatGrid>> mRawLeaves;  // loops and noise: the brick's channels
     LeafSet<openvdb::FloatGrid> mWidthLeaves, mRoiLeaves;  // loops: width blend t, ROI post-mask
-    /// Spot stills: the final values (lines and halos per level with writeSeries), composed as
+    /// Spot stills: the final values (lines and halos per level with the series), composed as
     /// the bricks arrive.
     struct SpotFrame
     {
@@ -203,8 +215,13 @@ private:
         std::uint32_t count = 0;
     };
     std::vector<LoopBlock> mLoopBlocks;
-    LeafSet<openvdb::FloatGrid> mInputLeaves, mScalarLeaves;
-    LeafSet<openvdb::Vec3SGrid> mTangentLeaves, mVelocityLeaves, mColorLeaves;
+    /// The grids every frame shares, by OutputGrid: the set of the row's type is used.
+    struct SharedLeaves
+    {
+        LeafSet<openvdb::FloatGrid> floats;
+        LeafSet<openvdb::Vec3SGrid> vectors;
+    };
+    std::array<SharedLeaves, kOutputGridCount> mShared;
     std::vector<FramePhase> mPhases; // a loop's frames 1 … N (ripple phases)
     /// The largest 1 / peak over every line and halo level (composeSpots' factors): a voxel whose
     /// raw channels times it stay clear below kSparseEpsilon shows in no frame.

@@ -8,6 +8,8 @@
 
 #include "vdbexport/io/FieldSpec.h"
 
+#include "lic/composite/OutputGrids.h"
+
 #include <nlohmann/json.hpp>
 
 #include <array>
@@ -23,13 +25,12 @@ struct OutputSpec
 {
     std::string path;            ///< `path`: output .vdb; may be empty until the CLI sets it
     int upsample = 2;            ///< `upsample`: output voxels per field voxel, [1, 16]
-    bool writeInput = false;     ///< `write_input`: also write the input texture grid `input`
-    bool writeSeries = false;    ///< `write_series`: also write `density_w<k>` / `halo_w<k>`
     std::string contrast = "stretch"; ///< `contrast`: "stretch" | "none"
-    bool writeTangent = false;   ///< `write_tangent`: also write the `tangent` vec3s grid
-    /// `write_velocity`: also write the `velocity` vec3s grid (world units per second: the flow
-    /// for a still or a sequence frame, the comets' or ripples' travel for a loop at field.fps)
-    bool writeVelocity = false;
+    /// The grids asked for by the `write_*` keys (`write_input`, `write_tangent`, `write_velocity`,
+    /// `write_series`): the output-grid table's rows asked for by a recipe key
+    /// (lic/composite/OutputGrids.h), so a new grid adds its key there.
+    lic::OutputGridSet grids;
+    bool writes(lic::OutputGrid g) const { return grids.has(g); }
     /// `half`: store float and vec3s grids as 16-bit halves on disk (about half the file;
     /// readers get float grids back, to ~5e-4 relative)
     bool half = false;
