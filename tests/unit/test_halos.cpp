@@ -263,11 +263,12 @@ TEST_F(HaloBake, RecipeCombinationsThatMeanNothingAreRefused)
     EXPECT_FALSE(fs::exists(sDir / "bad.vdb"));
 }
 
-TEST(SurfaceBake, SpotsOnTheRidgeOfSpeedGradientShowTheShearLayer)
+using SurfaceBake = lictest::TempDirTest;
+
+TEST_F(SurfaceBake, SpotsOnTheRidgeOfSpeedGradientShowTheShearLayer)
 {
     // Shear layer: u = 1.5 + tanh((z − 15.5)/2.5) along x; |∇speed| peaks on the plane z = 15.5.
-    const fs::path dir = lictest::processTempDir("surface");
-    fs::create_directories(dir);
+    const fs::path& dir = mDir;
     auto grid = lictest::makeField(openvdb::Coord(32), 1.0, openvdb::Vec3d(0.0), [](const openvdb::Vec3d& p) {
         return openvdb::Vec3d(1.5 + std::tanh((p[2] - 15.5) / 2.5), 0.0, 0.1 * std::sin(p[0] / 5.0));
     });
@@ -296,5 +297,4 @@ TEST(SurfaceBake, SpotsOnTheRidgeOfSpeedGradientShowTheShearLayer)
     std::printf("surface spots %zu, line voxels %zu, off the surface %zu\n", spots, lit, offSurface);
     EXPECT_GT(lit, 1000u);
     EXPECT_EQ(offSurface, 0u);
-    fs::remove_all(dir);
 }

@@ -1,4 +1,6 @@
 // Recipe parsing, validation, round trip; TerminalProgress output and timings.
+#include "TempDirSuite.h"
+
 #include <vdbexport/bake/Recipe.h>
 #include <vdbexport/cli/TerminalProgress.h>
 
@@ -69,12 +71,6 @@ std::string validateError(const std::string& patch)
 #define EXPECT_CONTAINS(haystack, needle)                                                          \
     EXPECT_NE(std::string(haystack).find(needle), std::string::npos)                              \
         << "message: \"" << (haystack) << "\"\nexpected to contain: \"" << (needle) << "\""
-
-std::filesystem::path tempPath(const std::string& name)
-{
-    return std::filesystem::temp_directory_path() /
-        ("licvdb_test_recipe_" + std::to_string(::getpid()) + "_" + name);
-}
 
 std::string readAll(FILE* f)
 {
@@ -260,21 +256,23 @@ TEST(Recipe, MalformedJsonStringGivesPosition)
     EXPECT_CONTAINS(msg, "inline: invalid JSON at line 2, column");
 }
 
-TEST(Recipe, MalformedJsonFileGivesFileAndPosition)
+/// Recipe files in a scratch directory of each test's own.
+using RecipeFile = lictest::TempDirTest;
+
+TEST_F(RecipeFile, MalformedJsonFileGivesFileAndPosition)
 {
-    const auto path = tempPath("bad.json");
+    const auto path = mDir / "bad.json";
     {
         std::ofstream(path) << "{\"lic\": {\"length\": 20}\n\"threads\": 0}\n";
     }
     const std::string msg = inputError([&] { vdbexport::loadRecipeFile(path.string()); });
-    std::filesystem::remove(path);
     EXPECT_CONTAINS(msg, path.string() + ": invalid JSON at line 2, column 9: syntax error");
 }
 
-TEST(Recipe, LoadRecipeFileParsesAndValidates)
+TEST_F(RecipeFile, LoadRecipeFileParsesAndValidates)
 {
-    const auto good = tempPath("good.json");
-    const auto bad = tempPath("range.json");
+    const auto good = mDir / "good.json";
+    const auto bad = mDir / "range.json";
     {
         std::ofstream(good) << kDesignExample;
         std::ofstream(bad) << R"({"lic": {"step": 0}})";
@@ -283,8 +281,6 @@ TEST(Recipe, LoadRecipeFileParsesAndValidates)
     EXPECT_EQ(r.animation.frames, 24);
     const std::string msg = inputError([&] { vdbexport::loadRecipeFile(bad.string()); });
     EXPECT_EQ(msg, bad.string() + ": lic.step: must be > 0 (got 0)");
-    std::filesystem::remove(good);
-    std::filesystem::remove(bad);
 }
 
 TEST(Recipe, MissingRecipeFileNamesPath)

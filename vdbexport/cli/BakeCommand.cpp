@@ -8,6 +8,7 @@
 #include "vdbexport/io/Numbers.h"
 
 #include <lic/composite/OutputGrids.h>
+#include <lic/engine/Engine.h>
 #include <lic/util/Error.h>
 
 #include <algorithm>
@@ -87,7 +88,9 @@ void BakeCommand::addLicFlags()
     RecipeFlags& f = *mFlags;
     f.option<std::string>("--input", "input.type", "Input texture: noise|spots [noise]");
     f.option<std::string>("--noise-filter", "input.noise_filter", "Noise reconstruction: binomial|none [binomial]");
-    f.option<std::string>("--engine", "lic.engine", "auto|" + joined(choices().engines) + ": auto = splat for spots, fast for noise [auto]");
+    f.option<std::string>("--engine", "lic.engine",
+                          "auto|" + joined(choices().engines) + ": auto = " + lic::toString(lic::chooseEngine("auto", true)) +
+                              " for spots, " + lic::toString(lic::chooseEngine("auto", false)) + " for noise [auto]");
     f.option<std::string>("--kernel", "lic.kernel", joined(choices().kernels) +
                                                          " (exp: oriented streamlets, bright head downstream) [box]");
     f.option<double>("--decay", "lic.decay", "exp kernel: weight ratio of consecutive samples, (0,1) [0.9]");

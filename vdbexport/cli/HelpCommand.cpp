@@ -5,6 +5,7 @@
 #include "vdbexport/io/InputFormats.h"
 
 #include <lic/composite/OutputGrids.h>
+#include <lic/engine/Engine.h>
 #include <lic/util/Error.h>
 
 #include <nlohmann/json.hpp>
@@ -33,6 +34,19 @@ nlohmann::json outputGridsJson()
     return out;
 }
 
+/// The engine table (lic/engine/Engine.h): each engine's summary, inputs and the lic keys it reads.
+nlohmann::json engineTableJson()
+{
+    nlohmann::json out = nlohmann::json::array();
+    for (const lic::EngineInfo& e : lic::engines()) {
+        nlohmann::json keys = nlohmann::json::array();
+        for (std::string_view k : e.keys) keys.push_back("lic." + std::string(k));
+        out.push_back({{"name", e.name}, {"summary", e.summary}, {"noise", e.noiseBricks != nullptr},
+                       {"spots", e.spotBricks != nullptr}, {"keys", keys}});
+    }
+    return out;
+}
+
 class HelpCommand final : public Command
 {
 public:
@@ -55,6 +69,7 @@ public:
                 j["formats"].push_back({{"name", f.name}, {"extensions", f.extensions}, {"kind", kindName(f.kind)},
                                         {"description", f.description}});
             j["grids"] = outputGridsJson();
+            j["engine_table"] = engineTableJson();
             std::cout << j.dump(2) << "\n";
             return 0;
         }

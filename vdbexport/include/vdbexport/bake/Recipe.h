@@ -80,8 +80,8 @@ struct RoiSpec
 /// The convolution (JSON `lic`).
 struct LicSpec
 {
-    /// `engine`: "auto" (splat for spots, fast for noise) | "naive" | "fast" | "splat"; a bake
-    /// records the engine it used
+    /// `engine`: "auto" (lic::chooseEngine picks by the input) or a name of the engine table
+    /// (lic/engine/Engine.h engines()); a bake records the engine it used
     std::string engine = "auto";
     std::string kernel = "box";      ///< `kernel`: "box" | "exp"
     double length = 20;              ///< `length`: kernel half-length (one direction), output voxels, (0, 10000]
