@@ -105,10 +105,8 @@ def check(root, choices, fix):
     # docs/recipe.md: value columns that list every choice, and nothing else.
     exact = {"`lic.engine`": ["auto"] + choices["engines"], "`lic.kernel`": choices["kernels"],
              "`input.distribution`": choices["distributions"],
-             "`field.format`": ["auto"] + [f["name"] for f in choices.get("formats", [])]}
+             "`field.format`": ["auto"] + [f["name"] for f in choices["formats"]]}
     for key, names in exact.items():
-        if key == "`field.format`" and "formats" not in choices:
-            continue
         row = row_of(recipe, key)
         if row is None:
             errors.append(f"docs/recipe.md: no row for {key}")

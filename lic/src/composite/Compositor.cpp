@@ -129,14 +129,12 @@ void Compositor::forEachStillSet(Fn&& fn)
 template<typename Fn>
 void Compositor::forEachShared(Fn&& fn)
 {
+    // The constructor enabled the set of the row's type, or none.
     for (const OutputGridRow& row : outputGrids()) {
         if (row.perFrame) continue;
         SharedLeaves& set = mShared[std::size_t(row.id)];
-        if (row.type == "vec3s") {
-            if (set.vectors.enabled()) fn(row, set.vectors);
-        } else if (set.floats.enabled()) {
-            fn(row, set.floats);
-        }
+        if (set.vectors.enabled()) fn(row, set.vectors);
+        else if (set.floats.enabled()) fn(row, set.floats);
     }
 }
 
