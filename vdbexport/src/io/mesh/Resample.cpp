@@ -255,7 +255,13 @@ std::vector<char> activeLattice(const Mesh& m, const Lattice& l, vtkDataArray* m
     vtkNew<vtkIdList> ids;
     for (const auto& ds : m.leaves) {
         double p[3];
+        std::vector<char> used(std::size_t(ds->GetNumberOfPoints()), 0); // points of no cell do not count
+        for (vtkIdType c = 0; c < ds->GetNumberOfCells(); ++c) {
+            ds->GetCellPoints(c, ids);
+            for (vtkIdType i = 0; i < ids->GetNumberOfIds(); ++i) used[std::size_t(ids->GetId(i))] = 1;
+        }
         for (vtkIdType i = 0; i < ds->GetNumberOfPoints(); ++i) {
+            if (!used[std::size_t(i)]) continue;
             ds->GetPoint(i, p);
             touch(p);
         }
