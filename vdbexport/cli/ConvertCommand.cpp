@@ -136,6 +136,8 @@ int ConvertCommand::list(const std::string& format) const
     json j{{"input", mInput}, {"format", s.format}, {"cells", s.cells}, {"points", s.points}, {"blocks", s.blocks},
            {"bounds", s.bounds}, {"median_cell_size", s.medianCellSize}, {"times", s.times}, {"arrays", json::array()}};
     if (s.time) j["time"] = *s.time;
+    if (!s.timeSources.empty()) j["time_sources"] = s.timeSources;
+    j["warnings"] = s.warnings;
     for (const auto& a : s.arrays)
         j["arrays"].push_back({{"name", a.name}, {"components", a.components}, {"on", a.cellData ? "cells" : "points"}});
     if (mCommon.json) {
@@ -151,10 +153,18 @@ int ConvertCommand::list(const std::string& format) const
         std::cout << "  array " << a.name << ": " << a.components << " component(s) on the " << (a.cellData ? "cells" : "points")
                   << "\n";
     if (!s.times.empty()) {
-        std::cout << "  " << s.times.size() << " time steps:";
-        for (std::size_t i = 0; i < s.times.size(); ++i) std::cout << " [" << i << "] " << s.times[i];
+        // Where the times come from (OpenFOAM: the processor directories or the top level): once
+        // when all come from one place, else after each.
+        const bool sources = s.timeSources.size() == s.times.size();
+        const bool oneSource = sources && std::all_of(s.timeSources.begin(), s.timeSources.end(),
+                                                      [&](const std::string& x) { return x == s.timeSources.front(); });
+        std::cout << "  " << s.times.size() << " time steps" << (oneSource ? ", from " + s.timeSources.front() : "") << ":";
+        for (std::size_t i = 0; i < s.times.size(); ++i)
+            std::cout << (sources && !oneSource ? "\n   " : "") << " [" << i << "] " << s.times[i]
+                      << (sources && !oneSource ? " from " + s.timeSources[i] : "");
         std::cout << "\n  (read: time " << (s.time ? *s.time : s.times.back()) << ")\n";
     }
+    for (const auto& w : s.warnings) std::cout << "  warning: " << w << "\n";
     return 0;
 }
 
@@ -168,7 +178,7 @@ int ConvertCommand::run(Context&)
     const bool series = !times.empty() && isFramePattern(mOut);
     const std::vector<double> all = series ? meshTimes(mInput, format) : std::vector<double>{};
 
-    json summary{{"input", mInput}, {"files", json::array()}, {"notes", json::array()}};
+    json summary{{"input", mInput}, {"files", json::array()}, {"notes", json::array()}, {"warnings", json::array()}};
     summary = runWithProgress(mCommon.quiet, mCommon.progressStyle(), [&](lic::Progress& progress) {
         OutputSet outputs; // every file appears together, or none
         const std::size_t steps = times.empty() ? 1 : times.size();
@@ -177,6 +187,7 @@ int ConvertCommand::run(Context&)
             if (!times.empty()) s.time = times[k];
             LoadedField f = loadField(s, progress);
             for (const auto& n : f.notes) summary["notes"].push_back(n);
+            for (const auto& w : f.warnings) summary["warnings"].push_back(w);
             f.velocity->setName("velocity");
             if (!f.velocity->getMetadata<openvdb::StringMetadata>("source_array"))
                 f.velocity->insertMeta("source_array", openvdb::StringMetadata(f.gridName));
@@ -196,10 +207,14 @@ int ConvertCommand::run(Context&)
         outputs.commit();
         return summary;
     });
-    if (mCommon.json) {
-        std::cout << summary.dump(2) << "\n";
-    } else if (!mCommon.quiet) {
+    // Warnings (a velocity zero or uniform everywhere, a case with only initial conditions): the
+    // files are written, and the warnings go to stderr even with --quiet or --json (bake refuses
+    // such a field).
+    if (mCommon.json) std::cout << summary.dump(2) << "\n";
+    if (!mCommon.json && !mCommon.quiet)
         for (const auto& n : summary["notes"]) std::cerr << "licvdb convert: " << n.get<std::string>() << "\n";
+    for (const auto& w : summary["warnings"]) std::cerr << "licvdb convert: warning: " << w.get<std::string>() << "\n";
+    if (!mCommon.json && !mCommon.quiet) {
         for (const auto& f : summary["files"])
             std::cerr << "wrote " << f["path"].get<std::string>() << " (" << f["active_voxels"].get<std::uint64_t>()
                       << " active voxels" << (f.contains("time") ? ", time " + f["time"].dump() : "") << ")\n";

@@ -248,6 +248,12 @@ FieldShare readFieldShare(const Plan& plan, int rank, int ranks, const std::stri
         }
     }
     s.loaded = loadField(r.field);
+    if (!s.loaded.warnings.empty()) { // a field with no flow to draw (OpenFOAM: zero, uniform, only 0/)
+        std::string what;
+        for (const auto& w : s.loaded.warnings) what += (what.empty() ? "" : "; ") + w;
+        throw lic::InputError("'" + r.field.path + "': " + what + ". bake refuses it (`licvdb convert` writes it "
+                              "with this warning, and bake reads the .vdb it writes)");
+    }
     s.field = std::make_unique<lic::VelocityField>(s.loaded.velocity);
     s.domain = std::make_unique<lic::OutputDomain>(*s.field, r.output.upsample);
     s.layout = std::make_unique<lic::BrickLayout>(*s.domain, lic::brickDim(plan.settings));

@@ -15,8 +15,13 @@ namespace vdbexport::mesh_module {
 
 MeshSummary describeMesh(const std::string& path, const std::string& format, const MeshOptions& options)
 {
+    ReadReport report;
+    report.describing = true; // a case without a velocity is still described
+    ReadReportScope scope(report);
     const Mesh m = readMesh(path, format, options);
     MeshSummary s;
+    s.timeSources = report.timeSources;
+    s.warnings = report.warnings;
     s.format = format;
     s.blocks = m.leaves.size();
     for (const auto& ds : m.leaves) {
@@ -58,7 +63,17 @@ Status describeEntry(const std::string& path, const std::string& format, const M
 Status loadEntry(const std::string& path, const std::string& format, const MeshOptions& options,
                  const std::string& nanPolicy, LoadedField& field)
 {
-    return module::guarded([&] { field = mesh_module::loadMesh(path, format, options, nanPolicy); }, kWhere);
+    return module::guarded(
+        [&] {
+            ReadReport report; // what the reader found: before the resampling's notes
+            {
+                ReadReportScope scope(report);
+                field = mesh_module::loadMesh(path, format, options, nanPolicy);
+            }
+            field.notes.insert(field.notes.begin(), report.notes.begin(), report.notes.end());
+            field.warnings.insert(field.warnings.end(), report.warnings.begin(), report.warnings.end());
+        },
+        kWhere);
 }
 
 std::string describeFormatEntry(const std::string& format) { return describeFormat(format); }

@@ -12,7 +12,7 @@
 
 namespace vdbexport::mesh_module {
 
-inline constexpr module::Identity kModule{"licvdb-mesh.so", "licvdb_mesh_module", /*version=*/1};
+inline constexpr module::Identity kModule{"licvdb-mesh.so", "licvdb_mesh_module", /*version=*/2};
 
 using module::Status;
 

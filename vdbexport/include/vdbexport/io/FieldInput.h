@@ -94,6 +94,9 @@ struct LoadedField
     std::string format;                                      ///< the name of its row of inputFormats()
     std::uint64_t nonFiniteReplaced = 0;                     ///< NaN/Inf values set to 0 (nan_policy zero)
     std::vector<std::string> notes;                          ///< what preparation did, for stderr
+    /// What reading found suspicious (OpenFOAM: a velocity zero or uniform everywhere, only initial
+    /// conditions): `convert` writes the field and prints these, `bake` refuses (exit 2).
+    std::vector<std::string> warnings;
 };
 
 /// @brief Read the field described by `spec` (format by extension unless `spec.format` is set),

@@ -53,6 +53,12 @@ struct MeshSummary
     double medianCellSize = 0;                 ///< the default voxel size
     std::vector<double> times;                 ///< time values of a series; empty for one mesh
     std::optional<double> time;                ///< the time read
+    /// Per time of `times`, where it is read from (OpenFOAM: "2 processor directories", "the top
+    /// level", …); empty for other formats.
+    std::vector<std::string> timeSources;
+    /// What the read found suspicious (OpenFOAM: a velocity zero or uniform everywhere, a case with
+    /// only its initial conditions); convert writes with these, bake refuses.
+    std::vector<std::string> warnings;
     struct Array
     {
         std::string name;

@@ -51,9 +51,35 @@ double chooseTime(const std::vector<double>& times, const std::optional<double>&
 /// set for a series (pvd, openfoam), left empty otherwise.
 vtkSmartPointer<vtkDataObject> readSingle(const std::string& path, const std::string& format, const MeshOptions& options,
                                           std::optional<double>& timeRead, std::vector<double>& times);
-/// An OpenFOAM case's times (sorted).
+/// What a read found worth telling beside the data (OpenFOAM: where the time came from, files left
+/// out, a velocity that is zero or uniform everywhere): notes for stderr, warnings (convert writes
+/// with them, bake refuses), and where each time of the series is read from.
+struct ReadReport
+{
+    std::vector<std::string> notes, warnings;
+    std::vector<std::string> timeSources; ///< one per time of the series (OpenFOAM); empty otherwise
+    /// Set by the caller: the read only describes (`convert --list`), so what would refuse a load
+    /// (OpenFOAM: a time without a velocity file) is a warning instead.
+    bool describing = false;
+};
+/// While one lives, the reads of this thread add to its report (the module's table collects them
+/// around each call: MeshModule.cpp).
+class ReadReportScope
+{
+public:
+    explicit ReadReportScope(ReadReport& report);
+    ~ReadReportScope();
+    ReadReportScope(const ReadReportScope&) = delete;
+    ReadReportScope& operator=(const ReadReportScope&) = delete;
+
+private:
+    ReadReport* mPrevious;
+};
+/// An OpenFOAM case's times (sorted): those of the top level and of the processor*/ directories.
 std::vector<double> openFoamTimes(const std::string& path);
-/// An OpenFOAM case's internal mesh and fields at options.time (or the latest time).
+/// An OpenFOAM case's internal mesh and fields at options.time (or the latest time), read through a
+/// shadow case (OpenFoam.cpp): from the processor directories when all have the time, else from the
+/// top level; reports the source, files left out, and zero/uniform velocity (ReadReport).
 vtkSmartPointer<vtkDataObject> readOpenFoam(const std::string& path, const MeshOptions& options,
                                             std::optional<double>& timeRead, std::vector<double>& times);
 
