@@ -6,6 +6,7 @@
 
 #include <cstdio>
 #include <iostream>
+#include <string>
 
 namespace vdbexport::cli {
 
@@ -44,7 +45,7 @@ void RenderCommand::addOptions(CLI::App& cmd)
         "Examples:\n"
         "  licvdb render jet_lic.vdb --out jet.png\n"
         "  licvdb render jet_lic.vdb --out jet.exr --view right --elevation 20 --size 1920,1080\n"
-        "  licvdb render jet_lic.vdb --out jet.png --density-range 0.6,1 --view-transform filmic\n"
+        "  licvdb render jet_lic.vdb --out jet.png --density-range 0.8,1 --view-transform filmic\n"
         "  licvdb render jet_lic.vdb --out jet_sbs.png --stereo sbs\n"
         "  licvdb render loop_0001.vdb --frames 24 --out loop.png --gif     # loop_0001.png … + loop.gif\n"
         "See docs/render.md for the algorithm, the transfer function and the --json camera.\n");
@@ -68,7 +69,8 @@ void RenderCommand::addLookOptions(CLI::App& cmd)
     cmd.add_option("--halo-strength", j.settings.haloStrength, "Opacity added at a halo exit per unit of its max halo [1]");
     cmd.add_option("--halo-threshold", j.settings.haloThreshold, "A ray is inside a halo where halo > this [0.05]");
     cmd.add_option("--density-scale", j.settings.densityScale, "Extinction per unit density per voxel length [auto: 2 with a halo grid, else fit]");
-    cmd.add_option("--density-range", mFlags.densityRange, "LO,HI transfer window on density [0,1]");
+    cmd.add_option("--density-range", mFlags.densityRange,
+                   "LO,HI transfer window on density, or auto (from the density's percentiles) [auto for a noise bake, else 0,1]");
     cmd.add_option("--brightness", j.settings.brightness, "Emission multiplier [1]");
     cmd.add_option("--step", j.settings.step, "Ray step, voxels [0.5]");
     cmd.add_flag("--no-skipping", mNoSkipping, "Diagnostic: march empty 8^3 bricks too (same image, slower)");
@@ -101,6 +103,27 @@ RenderJob RenderCommand::job() const
     return job;
 }
 
+/// `v` as printf's %g (0.7564, 1, 99.9).
+std::string fmtNumber(double v)
+{
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%g", v);
+    return buf;
+}
+
+/// The automatic density window, one line on stderr (nothing when the window was given or 0,1).
+void printDensityRange(const nlohmann::json& settings)
+{
+    if (!settings["density_range_auto"].get<bool>()) return;
+    const auto& range = settings["density_range"];
+    const auto& pct = settings["density_range_percentiles"];
+    const std::string how = pct.is_array()
+        ? "the " + fmtNumber(pct[0].get<double>()) + "th to " + fmtNumber(pct[1].get<double>()) + "th percentile of the density"
+        : std::string("the percentiles of the density leave no window, so 0 to its largest value");
+    std::fprintf(stderr, "density range %s,%s (auto: %s; --density-range LO,HI to set it)\n",
+                 fmtNumber(range[0].get<double>()).c_str(), fmtNumber(range[1].get<double>()).c_str(), how.c_str());
+}
+
 int RenderCommand::run(Context&)
 {
     const RenderJob j = job();
@@ -109,6 +132,7 @@ int RenderCommand::run(Context&)
     if (mCommon.json) {
         std::cout << summary.dump(2) << "\n";
     } else if (!mCommon.quiet) {
+        printDensityRange(summary["settings"]);
         for (const auto& f : summary["files"]) std::fprintf(stderr, "wrote %s\n", f.get<std::string>().c_str());
         std::fprintf(stderr, "rendered %d frame(s) in %.2f s\n", summary["frames"].get<int>(),
                      summary["seconds"]["render"].get<double>());

@@ -12,6 +12,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -139,14 +140,79 @@ void applyRenderFlags(RenderJob& job, const RenderFlagStrings& f)
             job.settings.lighting.direction = openvdb::Vec3d(v[0], v[1], v[2]);
         }
     }
-    if (!f.densityRange.empty()) {
-        const auto v = parseNumberList("--density-range", f.densityRange, "LO,HI with 0 <= LO < HI");
+    if (f.densityRange == "auto") {
+        job.densityRange = DensityRangeMode::Auto;
+    } else if (!f.densityRange.empty()) {
+        const auto v = parseNumberList("--density-range", f.densityRange, "LO,HI with 0 <= LO < HI, or auto");
         if (v.size() != 2 || !(v[0] >= 0.0 && v[0] < v[1]))
-            throw lic::InputError("--density-range \"" + f.densityRange + "\" is not valid; expected LO,HI with 0 <= LO < HI");
+            throw lic::InputError("--density-range \"" + f.densityRange +
+                                  "\" is not valid; expected LO,HI with 0 <= LO < HI, or auto");
         job.settings.densityLow = v[0];
         job.settings.densityHigh = v[1];
+        job.densityRange = DensityRangeMode::Fixed;
     }
     if (!f.stereo.empty()) job.stereo = lic::stereoFromString(f.stereo);
+}
+
+namespace {
+
+/// `fn(value, voxels)` for the active values of `grid`: each active leaf voxel once, then each
+/// active tile with the number of voxels it covers. Always in the same order.
+template<typename Fn>
+void forEachActive(const openvdb::FloatGrid& grid, Fn&& fn)
+{
+    using TreeT = openvdb::FloatTree;
+    for (auto leaf = grid.tree().cbeginLeaf(); leaf; ++leaf) {
+        const float* values = leaf->buffer().data();
+        for (auto on = leaf->getValueMask().beginOn(); on; ++on) fn(double(values[on.pos()]), std::uint64_t(1));
+    }
+    auto tile = grid.tree().cbeginValueOn();
+    tile.setMaxDepth(TreeT::ValueOnCIter::LEAF_DEPTH - 1); // above the leaves: tiles only
+    for (; tile; ++tile) fn(double(*tile), std::uint64_t(tile.getVoxelCount()));
+}
+
+/// The `q`-th percentile (0–100) of the values `bins` counts, `total` in all, bin i covering
+/// [i·width, (i + 1)·width): the rank's position within its bin, interpolated linearly.
+double percentileOf(const std::vector<std::uint64_t>& bins, std::uint64_t total, double width, double q)
+{
+    const double rank = q / 100.0 * double(total - 1); // 0-based, fractional
+    std::uint64_t before = 0;
+    for (std::size_t i = 0; i < bins.size(); ++i) {
+        if (bins[i] == 0) continue;
+        if (rank < double(before + bins[i])) return (double(i) + (rank - double(before) + 0.5) / double(bins[i])) * width;
+        before += bins[i];
+    }
+    return double(bins.size()) * width;
+}
+
+} // namespace
+
+AutoDensityRange autoDensityRange(const openvdb::FloatGrid& density)
+{
+    AutoDensityRange r;
+    double max = 0.0;
+    forEachActive(density, [&](double v, std::uint64_t n) {
+        if (v > 0.0) {
+            r.voxels += n;
+            max = std::max(max, v);
+        }
+    });
+    if (r.voxels == 0) return r; // nothing to see: the default window
+    constexpr std::size_t kBins = 65536;
+    const double width = max / double(kBins);
+    std::vector<std::uint64_t> bins(kBins, 0);
+    forEachActive(density, [&](double v, std::uint64_t n) {
+        if (v > 0.0) bins[std::min(kBins - 1, std::size_t(v / width))] += n;
+    });
+    const auto round4 = [](double v) { return std::round(v * 1e4) / 1e4; };
+    r.low = round4(percentileOf(bins, r.voxels, width, kAutoDensityLowPercentile));
+    r.high = std::min(round4(percentileOf(bins, r.voxels, width, kAutoDensityHighPercentile)), round4(max));
+    r.fromPercentiles = r.low < r.high && r.low < 1.0;
+    if (!r.fromPercentiles) { // no spread the percentiles can see (constant, or saturated at the max)
+        r.low = 0.0;
+        r.high = max;
+    }
+    return r;
 }
 
 std::string imageFramePath(const std::string& imagePath, int frame, int frames)
@@ -292,6 +358,7 @@ struct RenderPlan
     bool autoScale = false;        ///< densityScale was 0 = auto
     lic::CameraSettings camera;
     DisplayTransform display;
+    std::optional<AutoDensityRange> autoRange; ///< the window autoDensityRange chose on the first frame, if it did
     bool linearOut = false;        ///< an .exr: no display transform
     bool gifOut = false;           ///< --out is the .gif
 };
@@ -362,6 +429,25 @@ lic::Image renderView(const lic::HaloRaycaster& caster, lic::StereoMode stereo, 
     return stereo == lic::StereoMode::SideBySide ? lic::sideBySide(l, r) : lic::anaglyph(l, r);
 }
 
+/// What a bake's `density` grid says its input texture was (`lic_input`: noise or spots), or "".
+std::string bakeInput(const openvdb::GridBase& density)
+{
+    const auto m = density.getMetadata<openvdb::StringMetadata>("lic_input");
+    return m ? m->value() : std::string();
+}
+
+/// Settle the density window on the first frame: automatic for `--density-range auto` and, by
+/// default, for a dense noise bake; otherwise the window given (or 0,1).
+void chooseDensityRange(const RenderJob& job, RenderPlan& plan, const openvdb::FloatGrid& density)
+{
+    const bool automatic = job.densityRange == DensityRangeMode::Auto ||
+                           (job.densityRange == DensityRangeMode::ByBake && bakeInput(density) == "noise");
+    if (!automatic) return;
+    plan.autoRange = autoDensityRange(density);
+    plan.settings.densityLow = plan.autoRange->low;
+    plan.settings.densityHigh = plan.autoRange->high;
+}
+
 /// Read, render and write (or keep for the GIF) frame `f` (1-based) of `inputs`.
 void renderFrame(const RenderJob& job, RenderPlan& plan, const std::vector<std::string>& inputs, int f,
                  const openvdb::Vec3SGrid::Ptr& flow, lic::Progress& progress, RenderRun& run)
@@ -370,7 +456,10 @@ void renderFrame(const RenderJob& job, RenderPlan& plan, const std::vector<std::
     const std::string& input = inputs[std::size_t(f - 1)];
     auto t0 = Clock::now();
     LoadedVolume lv = loadVolume(input, /*wantHalo=*/true, settings.colormap.has_value(), settings.lighting.enabled);
-    if (f == 1) run.firstGrids = lv.gridTypes;
+    if (f == 1) {
+        run.firstGrids = lv.gridTypes;
+        chooseDensityRange(job, plan, *lv.volume.density); // a sequence keeps the first frame's window
+    }
     if (settings.lighting.enabled) lv.volume.flow = flow;
     lic::HaloRaycaster caster(lv.volume, settings, progress);
     run.tLoad += seconds(t0);
@@ -425,6 +514,10 @@ nlohmann::json settingsJson(const RenderPlan& plan)
     return {{"density_scale", s.densityScale},
             {"density_scale_auto", plan.autoScale},
             {"density_range", {s.densityLow, s.densityHigh}},
+            {"density_range_auto", plan.autoRange.has_value()},
+            {"density_range_percentiles", plan.autoRange && plan.autoRange->fromPercentiles
+                                              ? nlohmann::json{kAutoDensityLowPercentile, kAutoDensityHighPercentile}
+                                              : nlohmann::json(nullptr)},
             {"brightness", s.brightness},
             {"step_voxels", s.step},
             {"halo_strength", s.haloStrength},

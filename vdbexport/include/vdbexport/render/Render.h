@@ -9,11 +9,21 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
 
 namespace vdbexport {
+
+/// How a render settles its density window (`--density-range`).
+enum class DensityRangeMode
+{
+    ByBake, ///< default: automatic (autoDensityRange) for a dense noise bake (`density` metadata
+            ///< lic_input = "noise"), else settings.densityLow/High (0,1)
+    Auto,   ///< `--density-range auto`: automatic for any file
+    Fixed,  ///< `--density-range LO,HI`: settings.densityLow/High as given
+};
 
 /// Everything `licvdb render` does, as values.
 struct RenderJob
@@ -24,7 +34,8 @@ struct RenderJob
     std::optional<double> azimuth;      ///< degrees; overrides the view's
     std::optional<double> elevation;    ///< degrees; overrides the view's
     lic::CameraSettings camera;         ///< size, fov, ortho, distance (azimuth/elevation set from the above)
-    lic::RenderSettings settings;
+    lic::RenderSettings settings;       ///< densityLow/High give way to the automatic window when densityRange picks it
+    DensityRangeMode densityRange = DensityRangeMode::ByBake;
     std::string colormap;               ///< over `scalar`; empty = `color` grid or white
     std::string field;                  ///< velocity .vdb for the tangent when there is no `tangent` grid
     lic::StereoMode stereo = lic::StereoMode::None;
@@ -43,13 +54,33 @@ struct RenderFlagStrings
     std::string view;         ///< front|back|left|right|top|bottom
     std::string halos;        ///< on|off
     std::string light;        ///< "headlight" or "X,Y,Z" (direction towards the light)
-    std::string densityRange; ///< "LO,HI"
+    std::string densityRange; ///< "LO,HI" or "auto"
     std::string stereo;       ///< sbs|anaglyph|none
 };
 
 /// @brief Parse `flags` into `job`. @throw lic::InputError naming the flag, the bad value and
 ///        what was expected.
 void applyRenderFlags(RenderJob& job, const RenderFlagStrings& flags);
+
+/// The density window `--density-range auto` chooses from a `density` grid.
+struct AutoDensityRange
+{
+    double low = 0.0, high = 1.0;
+    std::uint64_t voxels = 0;     ///< active voxels with density > 0, which the percentiles are of
+    bool fromPercentiles = false; ///< false: the percentiles gave no window, it is 0 to the max
+};
+
+/// Percentiles of the active voxels' density (> 0) that bound the automatic window.
+inline constexpr double kAutoDensityLowPercentile = 90.0;
+inline constexpr double kAutoDensityHighPercentile = 99.9;
+
+/// @brief The automatic density window of `density`: low = the kAutoDensityLowPercentile-th and
+///        high = the kAutoDensityHighPercentile-th percentile of the density of the active voxels
+///        with density > 0 (a 65536-bin histogram over [0, max], interpolated in the bin, rounded
+///        to 10⁻⁴), so that only the brightest tenth of a dense noise texture — the cores of its
+///        streaks — is visible. Deterministic. When that gives no window the renderer accepts
+///        (no voxel > 0, all equal, or low ≥ 1), it is 0 to the largest density (0,1 if none).
+AutoDensityRange autoDensityRange(const openvdb::FloatGrid& density);
 
 /// The image of frame `frame` (1-based) of `frames`: IMAGE.png for a still, IMAGE_0001.png … for
 /// a sequence (4 digits).
