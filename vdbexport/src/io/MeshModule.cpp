@@ -1,6 +1,6 @@
 // CFD meshes through VTK, built as licvdb's mesh module, licvdb-mesh.so (MeshModuleApi.h), which
 // licvdb loads on first use; the functions of MeshInput.h (MeshInput.cpp) read the mesh in a child
-// process first, then call these. VTK's readers parse the files (mesh/Read.cpp, mesh/OpenFoam.cpp),
+// process first, then call these. VTK's readers parse the files (mesh/Read.cpp, mesh/OpenFoam*.cpp),
 // mesh/Check.cpp checks what they gave, and mesh/Resample.cpp samples it on the VDB lattice
 // (VTK's probe) and turns the samples inside the mesh into grids. This file is the module's table.
 #include "io/mesh/Mesh.h"
@@ -15,13 +15,10 @@ namespace vdbexport::mesh_module {
 
 MeshSummary describeMesh(const std::string& path, const std::string& format, const MeshOptions& options)
 {
-    ReadReport report;
-    report.describing = true; // a case without a velocity is still described
-    ReadReportScope scope(report);
-    const Mesh m = readMesh(path, format, options);
+    const Mesh m = readMesh(path, format, options, /*describing=*/true); // a case without a velocity is described
     MeshSummary s;
-    s.timeSources = report.timeSources;
-    s.warnings = report.warnings;
+    s.timeSources = m.report.timeSources;
+    s.warnings = m.report.warnings;
     s.format = format;
     s.blocks = m.leaves.size();
     for (const auto& ds : m.leaves) {
@@ -30,6 +27,7 @@ MeshSummary describeMesh(const std::string& path, const std::string& format, con
     }
     s.bounds = boundsOf(m.leaves);
     s.medianCellSize = medianCellSize(m.leaves);
+    s.defaultVoxelSize = defaultLatticeVoxelSize(m, options, path, s.voxelSizeRule);
     s.times = m.times;
     s.time = m.time;
     std::set<std::pair<std::string, bool>> seen;
@@ -63,17 +61,7 @@ Status describeEntry(const std::string& path, const std::string& format, const M
 Status loadEntry(const std::string& path, const std::string& format, const MeshOptions& options,
                  const std::string& nanPolicy, LoadedField& field)
 {
-    return module::guarded(
-        [&] {
-            ReadReport report; // what the reader found: before the resampling's notes
-            {
-                ReadReportScope scope(report);
-                field = mesh_module::loadMesh(path, format, options, nanPolicy);
-            }
-            field.notes.insert(field.notes.begin(), report.notes.begin(), report.notes.end());
-            field.warnings.insert(field.warnings.end(), report.warnings.begin(), report.warnings.end());
-        },
-        kWhere);
+    return module::guarded([&] { field = mesh_module::loadMesh(path, format, options, nanPolicy); }, kWhere);
 }
 
 std::string describeFormatEntry(const std::string& format) { return describeFormat(format); }

@@ -12,7 +12,7 @@
 
 namespace vdbexport::mesh_module {
 
-inline constexpr module::Identity kModule{"licvdb-mesh.so", "licvdb_mesh_module", /*version=*/2};
+inline constexpr module::Identity kModule{"licvdb-mesh.so", "licvdb_mesh_module", /*version=*/3};
 
 using module::Status;
 

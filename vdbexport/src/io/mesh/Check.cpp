@@ -319,10 +319,11 @@ std::array<std::array<double, 3>, 2> boundsOf(const std::vector<vtkSmartPointer<
     }
     return box;
 }
-Mesh readMesh(const std::string& path, const std::string& format, const MeshOptions& options)
+Mesh readMesh(const std::string& path, const std::string& format, const MeshOptions& options, bool describing)
 {
     Mesh m;
-    m.data = readSingle(path, format, options, m.time, m.times);
+    m.report.describing = describing;
+    m.data = readSingle(path, format, options, m.time, m.times, m.report);
     if (!m.data) detail::inputError(path, "VTK read nothing");
     m.leaves = leavesOf(m.data);
     if (m.leaves.empty())

@@ -1,4 +1,4 @@
-// OpenFOAM dictionaries as OpenFOAM reads them, for VTK's reader (FoamDict.cpp): the directives and
+// OpenFOAM dictionaries as OpenFOAM reads them, for VTK's reader (FoamDict*.cpp): the directives and
 // macros that VTK 9.1's vtkOpenFOAMReader cannot read (#includeEtc, #includeFunc, scoped $:a.b and
 // $../x, `uniform $var`) expanded the way OpenFOAM does, and boundaryField rewritten to one entry per
 // patch (VTK does not match patch groups and drops a field's point data when a patch has no entry).

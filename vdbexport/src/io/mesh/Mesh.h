@@ -1,5 +1,5 @@
 // The mesh module's parts (licvdb-mesh.so, io/MeshModuleApi.h): VTK's messages (Messages.cpp),
-// reading each format (Read.cpp; OpenFOAM cases in OpenFoam.cpp), checking what was read
+// reading each format (Read.cpp; OpenFOAM cases in OpenFoam*.cpp), checking what was read
 // (Check.cpp), and resampling it onto the VDB lattice (Resample.cpp). MeshModule.cpp is the
 // module's entry table. Internal to the module: nothing here is seen by licvdb itself.
 #pragma once
@@ -35,7 +35,7 @@ std::string firstError(const std::string& text);
 void runChecked(vtkAlgorithm* algorithm, const std::string& path, const std::string& what,
                 const std::function<void()>& update);
 
-// ---- reading (Read.cpp, OpenFoam.cpp) ---------------------------------------------------------
+// ---- reading (Read.cpp, OpenFoam*.cpp) --------------------------------------------------------
 
 /// `s` in lower case (ASCII).
 std::string lower(std::string s);
@@ -47,13 +47,10 @@ std::vector<double> sortedUnique(std::vector<double> t);
 /// The time to read among `times` (sorted): `wanted` (which must be one of them, to 1e-9
 /// relative) or the latest.
 double chooseTime(const std::vector<double>& times, const std::optional<double>& wanted, const std::string& path);
-/// What the reader of `format` gives for `path`: the time read and the series' times (sorted) are
-/// set for a series (pvd, openfoam), left empty otherwise.
-vtkSmartPointer<vtkDataObject> readSingle(const std::string& path, const std::string& format, const MeshOptions& options,
-                                          std::optional<double>& timeRead, std::vector<double>& times);
 /// What a read found worth telling beside the data (OpenFOAM: where the time came from, files left
 /// out, a velocity that is zero or uniform everywhere): notes for stderr, warnings (convert writes
-/// with them, bake refuses), and where each time of the series is read from.
+/// with them, bake refuses), and where each time of the series is read from. The reads add to it;
+/// the module's table hands it on in its MeshSummary or LoadedField (MeshModule.cpp, Resample.cpp).
 struct ReadReport
 {
     std::vector<std::string> notes, warnings;
@@ -62,26 +59,21 @@ struct ReadReport
     /// (OpenFOAM: a time without a velocity file) is a warning instead.
     bool describing = false;
 };
-/// While one lives, the reads of this thread add to its report (the module's table collects them
-/// around each call: MeshModule.cpp).
-class ReadReportScope
-{
-public:
-    explicit ReadReportScope(ReadReport& report);
-    ~ReadReportScope();
-    ReadReportScope(const ReadReportScope&) = delete;
-    ReadReportScope& operator=(const ReadReportScope&) = delete;
-
-private:
-    ReadReport* mPrevious;
-};
-/// An OpenFOAM case's times (sorted): those of the top level and of the processor*/ directories.
+/// What the reader of `format` gives for `path`: the time read and the series' times (sorted) are
+/// set for a series (pvd, openfoam), left empty otherwise; what it found is added to `report`.
+vtkSmartPointer<vtkDataObject> readSingle(const std::string& path, const std::string& format, const MeshOptions& options,
+                                          std::optional<double>& timeRead, std::vector<double>& times,
+                                          ReadReport& report);
+/// An OpenFOAM case's times (sorted): those of the top level and of the processor*/ directories
+/// (OpenFoamTimes.cpp).
 std::vector<double> openFoamTimes(const std::string& path);
 /// An OpenFOAM case's internal mesh and fields at options.time (or the latest time), read through a
-/// shadow case (OpenFoam.cpp): from the processor directories when all have the time, else from the
-/// top level; reports the source, files left out, and zero/uniform velocity (ReadReport).
+/// shadow case (OpenFoamCase.cpp): from the processor directories when all have the time, else from the
+/// top level; adds to `report` the times' sources, the source read, files left out or expanded, and
+/// zero/uniform velocity.
 vtkSmartPointer<vtkDataObject> readOpenFoam(const std::string& path, const MeshOptions& options,
-                                            std::optional<double>& timeRead, std::vector<double>& times);
+                                            std::optional<double>& timeRead, std::vector<double>& times,
+                                            ReadReport& report);
 
 // ---- checking (Check.cpp) ---------------------------------------------------------------------
 
@@ -92,10 +84,12 @@ struct Mesh
     std::vector<vtkSmartPointer<vtkDataSet>> leaves;
     std::optional<double> time;
     std::vector<double> times;
+    ReadReport report; ///< what the read found (its notes and warnings go to the caller's summary or field)
 };
 
 /// Read `path` and check it: cells, points and arrays that VTK's filters can use safely.
-Mesh readMesh(const std::string& path, const std::string& format, const MeshOptions& options);
+/// `describing`: the read only describes (ReadReport::describing).
+Mesh readMesh(const std::string& path, const std::string& format, const MeshOptions& options, bool describing = false);
 /// The non-empty datasets of what a reader gave (a dataset, or the leaves of a composite).
 std::vector<vtkSmartPointer<vtkDataSet>> leavesOf(vtkDataObject* data);
 /// VTK's own arrays (vtkValidPointMask, vtkGhostType...), not the file's.
@@ -109,6 +103,9 @@ std::uint64_t checkVelocityValues(const std::vector<vtkSmartPointer<vtkDataSet>>
                                   const std::string& nanPolicy, const std::string& path);
 /// The median over (a sample of) the cells of the cube root of each cell's bounding-box volume.
 double medianCellSize(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves);
+/// The lattice's voxel size when none is given (the default for LIC, docs/inputs.md), and in
+/// `rule` which part of the rule chose it (Resample.cpp).
+double defaultLatticeVoxelSize(const Mesh& m, const MeshOptions& options, const std::string& path, std::string& rule);
 std::array<std::array<double, 3>, 2> boundsOf(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves);
 
 } // namespace vdbexport::mesh_module

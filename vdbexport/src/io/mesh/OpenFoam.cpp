@@ -1,20 +1,11 @@
-// OpenFOAM cases through VTK's readers: the internal mesh and its fields at one time.
-//
-// Each read goes through a shadow case: a temporary directory (removed after the read, also on
-// errors) of symlinks to the case's system/ and constant/, and a real directory for the time read,
-// at the top level or in every processor*/ directory, holding symlinks to its field files except
-// (a) files whose header `object` is not their file name (a stale U.orig with `object U;` would
-// otherwise replace U: VTK names fields by `object`; "the field named U is the file U"), and
-// (b) ASCII files with dictionary directives VTK cannot read (#includeEtc, `uniform $var`,
-// boundaryField keyed by patch group), which get expanded copies (FoamDict.h). Gzipped and binary
-// field files are linked as they are.
-//
-// Decomposed cases: the times are those of the top level and of the processor*/ directories (a
-// time is in the processors when every one has it); a time is read from the processors when they
-// have it (VTK's vtkPOpenFOAMReader, all processor directories in this process through a
-// vtkDummyController), else from the top level, and the read's note says which. A time only some
-// processors have is an error naming them: nothing falls back silently.
+// OpenFOAM cases through VTK's readers: the internal mesh and its fields at one time, read from
+// the case's shadow (OpenFoamCase.cpp) by vtkOpenFOAMReader, or, for a time the processor
+// directories have (OpenFoamTimes.cpp), by vtkPOpenFOAMReader (all processor directories in this
+// process through a vtkDummyController), its processors' meshes then merged into one. The read's
+// report says where the time came from, files left out or expanded, and a velocity that is zero or
+// uniform everywhere.
 #include "io/mesh/Mesh.h"
+#include "io/mesh/OpenFoamImpl.h"
 
 #include "io/DenseCommon.h"
 #include "io/mesh/FoamDict.h"
@@ -24,7 +15,6 @@
 #include <vtkCellData.h>
 #include <vtkCellType.h>
 #include <vtkDataArray.h>
-#include <vtkDoubleArray.h>
 #include <vtkDummyController.h>
 #include <vtkIdList.h>
 #include <vtkInformation.h>
@@ -37,497 +27,17 @@
 #include <vtkUnstructuredGrid.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
-#include <cstdlib>
-#include <filesystem>
-#include <fstream>
-#include <map>
-#include <sstream>
 #include <unordered_map>
-
-#include <unistd.h>
 
 namespace fs = std::filesystem;
 
 namespace vdbexport::mesh_module {
 
 using detail::q;
+using namespace openfoam;
 
 namespace {
-
-thread_local ReadReport* tReport = nullptr;
-
-void note(const std::string& text)
-{
-    if (tReport) tReport->notes.push_back(text);
-}
-
-void warn(const std::string& text)
-{
-    if (tReport) tReport->warnings.push_back(text);
-}
-
-std::string joinedList(const std::vector<std::string>& items, const std::string& sep = ", ", std::size_t most = 12)
-{
-    std::string s;
-    for (std::size_t i = 0; i < items.size() && i < most; ++i) s += (i ? sep : "") + items[i];
-    if (items.size() > most) s += sep + "… (" + std::to_string(items.size()) + " in all)";
-    return s;
-}
-
-// ---- the case on disk -----------------------------------------------------------------------
-
-/// The case directory of `path`: the directory itself, or the case of a `case.foam` / controlDict.
-/// Checks that it has system/controlDict.
-fs::path caseDirOf(const std::string& path)
-{
-    std::error_code ec;
-    if (fs::is_directory(path, ec)) {
-        const fs::path dir(path);
-        if (!fs::exists(dir / "system" / "controlDict", ec)) {
-            const std::string name = fs::absolute(dir, ec).lexically_normal().filename().string();
-            const fs::path parent = fs::absolute(dir, ec).lexically_normal().parent_path();
-            if (name.rfind("processor", 0) == 0 && fs::exists(parent / "system" / "controlDict", ec))
-                throw lic::InputError(q(path) + " is a processor directory of the decomposed OpenFOAM case " + q(parent.string())
-                                      + ": pass the case directory (its processor directories are read together)");
-            throw lic::InputError(q(path) + " is a directory but not an OpenFOAM case: it has no system/controlDict");
-        }
-        return dir;
-    }
-    if (!fs::exists(path, ec)) throw lic::InputError("OpenFOAM case " + q(path) + " not found");
-    const fs::path dir = fs::path(path).filename() == "controlDict" ? fs::path(path).parent_path().parent_path()
-                                                                      : fs::path(path).parent_path();
-    if (!fs::exists(dir / "system" / "controlDict", ec))
-        throw lic::InputError(q(path) + ": the OpenFOAM case " + q(dir.string()) + " has no system/controlDict");
-    return dir.empty() ? fs::path(".") : dir;
-}
-
-/// The time value a directory name stands for: a plain decimal number ("0", "0.25", "1e-05").
-std::optional<double> timeOfName(const std::string& name)
-{
-    if (name.empty() || name.find_first_of("xXnN") != std::string::npos || name[0] == '+') return std::nullopt;
-    char* end = nullptr;
-    const double v = std::strtod(name.c_str(), &end);
-    if (end != name.c_str() + name.size() || !std::isfinite(v)) return std::nullopt;
-    return v;
-}
-
-bool sameTime(double a, double b) { return std::abs(a - b) <= 1e-9 * std::max(1.0, std::abs(a)); }
-
-struct TimeDir
-{
-    double value = 0;
-    std::string name;
-};
-
-bool hasRegularFile(const fs::path& dir)
-{
-    std::error_code ec;
-    for (const auto& e : fs::directory_iterator(dir, ec))
-        if (e.is_regular_file(ec)) return true;
-    return false;
-}
-
-/// The time directories of `dir` that hold at least one file (a field), sorted by time.
-std::vector<TimeDir> timeDirsOf(const fs::path& dir)
-{
-    std::vector<TimeDir> out;
-    std::error_code ec;
-    for (const auto& e : fs::directory_iterator(dir, ec)) {
-        if (!e.is_directory(ec)) continue;
-        const std::string name = e.path().filename().string();
-        if (const auto t = timeOfName(name); t && hasRegularFile(e.path())) out.push_back({*t, name});
-    }
-    std::sort(out.begin(), out.end(), [](const TimeDir& a, const TimeDir& b) { return a.value < b.value; });
-    return out;
-}
-
-const TimeDir* findTime(const std::vector<TimeDir>& dirs, double t)
-{
-    for (const auto& d : dirs)
-        if (sameTime(d.value, t)) return &d;
-    return nullptr;
-}
-
-/// Where a time of a case is read from.
-enum class From { Processors, TopLevel, Incomplete };
-
-struct FoamTime
-{
-    double value = 0;
-    From from = From::TopLevel;
-    std::optional<std::string> topName;          ///< its directory at the top level
-    std::vector<std::string> procNames;          ///< its directory in each processor ("" where missing)
-};
-
-struct FoamCase
-{
-    fs::path dir;
-    std::vector<std::string> processors; ///< processor0, processor1, … (by number)
-    std::vector<FoamTime> times;         ///< sorted
-};
-
-FoamCase scanCase(const std::string& path)
-{
-    FoamCase c;
-    c.dir = caseDirOf(path);
-    std::error_code ec;
-    std::vector<std::pair<long, std::string>> procs;
-    bool collated = false;
-    for (const auto& e : fs::directory_iterator(c.dir, ec)) {
-        if (!e.is_directory(ec)) continue;
-        const std::string name = e.path().filename().string();
-        if (name.rfind("processor", 0) != 0) continue;
-        const std::string rest = name.substr(9);
-        if (!rest.empty() && std::all_of(rest.begin(), rest.end(), [](char ch) { return ch >= '0' && ch <= '9'; }))
-            procs.emplace_back(std::strtol(rest.c_str(), nullptr, 10), name);
-        else if (rest.rfind('s', 0) == 0)
-            collated = true; // processors<N>, processors<N>_<a>-<b>: OpenFOAM's collated format
-    }
-    std::sort(procs.begin(), procs.end());
-    for (auto& p : procs) c.processors.push_back(p.second);
-    if (collated && c.processors.empty())
-        detail::inputError(c.dir.string(), "is decomposed in OpenFOAM's collated format (processors<N>/), which VTK 9.1 "
-                                           "cannot read: run reconstructPar, or decompose with "
-                                           "`decomposePar -fileHandler uncollated` (processor0/, processor1/, …)");
-
-    const std::vector<TimeDir> top = timeDirsOf(c.dir);
-    std::vector<std::vector<TimeDir>> proc;
-    for (const auto& p : c.processors) proc.push_back(timeDirsOf(c.dir / p));
-    std::vector<double> all;
-    for (const auto& d : top) all.push_back(d.value);
-    for (const auto& list : proc)
-        for (const auto& d : list) all.push_back(d.value);
-    std::sort(all.begin(), all.end());
-    std::vector<double> unique;
-    for (double t : all)
-        if (unique.empty() || !sameTime(unique.back(), t)) unique.push_back(t);
-    for (double t : unique) {
-        FoamTime ft;
-        ft.value = t;
-        if (const TimeDir* d = findTime(top, t)) ft.topName = d->name;
-        std::size_t have = 0;
-        for (const auto& list : proc) {
-            const TimeDir* d = findTime(list, t);
-            ft.procNames.push_back(d ? d->name : "");
-            have += d != nullptr;
-        }
-        ft.from = !c.processors.empty() && have == c.processors.size() ? From::Processors
-                  : ft.topName                                         ? From::TopLevel
-                                                                       : From::Incomplete;
-        c.times.push_back(ft);
-    }
-    return c;
-}
-
-std::vector<std::string> processorsWith(const FoamCase& c, const FoamTime& t, bool with)
-{
-    std::vector<std::string> out;
-    for (std::size_t i = 0; i < c.processors.size(); ++i)
-        if (t.procNames[i].empty() != with) out.push_back(c.processors[i]);
-    return out;
-}
-
-std::string processorsText(const FoamCase& c)
-{
-    return std::to_string(c.processors.size()) + " processor director" + (c.processors.size() == 1 ? "y" : "ies");
-}
-
-/// Where time `t` is read from, for --list and notes.
-std::string sourceText(const FoamCase& c, const FoamTime& t)
-{
-    switch (t.from) {
-    case From::Processors:
-        return processorsText(c) + (t.topName ? " (the top level has it too)" : "");
-    case From::TopLevel: {
-        if (c.processors.empty()) return "the top level";
-        const auto with = processorsWith(c, t, true);
-        return with.empty() ? "the top level (not in the processor directories)"
-                            : "the top level (only " + joinedList(with) + " of " + processorsText(c) + " have it)";
-    }
-    case From::Incomplete:
-        return "incomplete: only in " + joinedList(processorsWith(c, t, true)) + " of " + processorsText(c);
-    }
-    return "";
-}
-
-// ---- field files --------------------------------------------------------------------------
-
-/// The entries of a FoamFile header that matter here.
-struct FoamHeader
-{
-    bool found = false;
-    std::string object, format, cls;
-};
-
-/// Read the `FoamFile { … }` header at the start of `file` (the first 8 kB; comments skipped).
-FoamHeader readHeader(const fs::path& file)
-{
-    FoamHeader h;
-    std::ifstream in(file, std::ios::binary);
-    std::string buf(8192, '\0');
-    in.read(buf.data(), std::streamsize(buf.size()));
-    buf.resize(std::size_t(in.gcount()));
-    // Tokens of the text without comments; ';', '{', '}' are tokens of their own.
-    std::vector<std::string> tokens;
-    std::string cur;
-    auto flush = [&] {
-        if (!cur.empty()) tokens.push_back(cur);
-        cur.clear();
-    };
-    for (std::size_t i = 0; i < buf.size(); ++i) {
-        const char ch = buf[i];
-        if (ch == '/' && i + 1 < buf.size() && buf[i + 1] == '/') {
-            flush();
-            while (i < buf.size() && buf[i] != '\n') ++i;
-        } else if (ch == '/' && i + 1 < buf.size() && buf[i + 1] == '*') {
-            flush();
-            const auto end = buf.find("*/", i + 2);
-            if (end == std::string::npos) break;
-            i = end + 1;
-        } else if (ch == '"') {
-            flush();
-            const auto end = buf.find('"', i + 1);
-            if (end == std::string::npos) break;
-            tokens.push_back(buf.substr(i + 1, end - i - 1));
-            i = end;
-        } else if (ch == ';' || ch == '{' || ch == '}') {
-            flush();
-            tokens.emplace_back(1, ch);
-        } else if (std::isspace(static_cast<unsigned char>(ch)) || ch == '\0') {
-            flush();
-        } else {
-            cur += ch;
-        }
-        if (tokens.size() > 2 && tokens.back() == "}") break; // the header's end (checked below)
-    }
-    flush();
-    if (tokens.size() < 2 || tokens[0] != "FoamFile" || tokens[1] != "{") return h;
-    h.found = true;
-    for (std::size_t i = 2; i + 1 < tokens.size() && tokens[i] != "}"; ++i) {
-        if (tokens[i] == "object") h.object = tokens[i + 1];
-        else if (tokens[i] == "format") h.format = tokens[i + 1];
-        else if (tokens[i] == "class") h.cls = tokens[i + 1];
-    }
-    return h;
-}
-
-std::string readAll(const fs::path& file)
-{
-    std::ifstream in(file, std::ios::binary);
-    std::ostringstream s;
-    s << in.rdbuf();
-    return s.str();
-}
-
-/// Write `text` to `file` (a copy in the shadow case).
-void writeFile(const fs::path& file, const std::string& text)
-{
-    std::ofstream out(file, std::ios::binary);
-    out << text;
-    out.close();
-    if (!out) throw lic::Error("cannot write " + q(file.string()) + " (the OpenFOAM case's temporary shadow)");
-}
-
-/// Files OpenFOAM (and VTK) would not take for a field of their own: backups and originals.
-bool backupName(const std::string& name)
-{
-    std::string n = name;
-    if (n.size() > 3 && n.compare(n.size() - 3, 3, ".gz") == 0) n.resize(n.size() - 3);
-    if (!n.empty() && n.back() == '~') return true;
-    for (const char* ext : {".orig", ".bak", ".BAK", ".old", ".save"}) {
-        const std::string e(ext);
-        if (n.size() > e.size() && n.compare(n.size() - e.size(), e.size(), e) == 0) return true;
-    }
-    return false;
-}
-
-bool isGz(const std::string& name) { return name.size() > 3 && name.compare(name.size() - 3, 3, ".gz") == 0; }
-
-std::string fieldName(const std::string& file) { return isGz(file) ? file.substr(0, file.size() - 3) : file; }
-
-/// `text` (a field file) with its header's `object` set to `name`.
-std::string renamedObject(const std::string& text, const std::string& name)
-{
-    const auto head = text.find("FoamFile");
-    const auto close = head == std::string::npos ? head : text.find('}', head);
-    if (close == std::string::npos) return text;
-    std::size_t pos = head;
-    while ((pos = text.find("object", pos)) != std::string::npos && pos < close) {
-        const bool wordStart = pos == 0 || std::isspace(static_cast<unsigned char>(text[pos - 1])) || text[pos - 1] == '{'
-                               || text[pos - 1] == ';';
-        const auto semi = text.find(';', pos);
-        if (wordStart && semi != std::string::npos && semi < close)
-            return text.substr(0, pos) + "object " + name + text.substr(semi);
-        pos += 6;
-    }
-    return text;
-}
-
-/// What a field directory of the read time holds, for the velocity check and the notes.
-struct TimeFields
-{
-    std::vector<std::string> fields;   ///< field names (file names without .gz) linked or copied
-    std::vector<std::string> vectors;  ///< those whose header class is a vector field
-    std::vector<std::string> leftOut;  ///< "0/U.orig (object U)"
-    std::vector<std::string> expanded; ///< "0/U"
-};
-
-/// Make `dst` (a new directory of the shadow) the field directory `src` as VTK should read it.
-/// `label` names src in notes ("0", "processor1/0.5"); `wanted` is the --grid name (a file picked by
-/// name even when its header names another object).
-void shadowTimeDir(const fs::path& src, const fs::path& dst, const std::string& label, const std::string& wanted,
-                   const FoamDictContext& base, TimeFields& out)
-{
-    fs::create_directory(dst);
-    std::error_code ec;
-    std::vector<fs::directory_entry> entries;
-    for (const auto& e : fs::directory_iterator(src, ec)) entries.push_back(e);
-    std::sort(entries.begin(), entries.end(), [](const auto& a, const auto& b) { return a.path() < b.path(); });
-    for (const auto& e : entries) {
-        const std::string name = e.path().filename().string();
-        const fs::path target = fs::absolute(e.path());
-        if (e.is_directory(ec)) { // uniform/, polyMesh/ (a moving mesh), lagrangian/
-            fs::create_directory_symlink(target, dst / name);
-            continue;
-        }
-        if (!e.is_regular_file(ec)) continue;
-        const std::string field = fieldName(name);
-        const bool picked = !wanted.empty() && (name == wanted || field == wanted);
-        const FoamHeader h = isGz(name) ? FoamHeader{} : readHeader(e.path());
-        if (backupName(name) && !picked) {
-            out.leftOut.push_back(label + "/" + name + (h.found ? " (object " + h.object + ")" : ""));
-            continue;
-        }
-        if (isGz(name)) { // VTK reads it; solver output carries no directives
-            fs::create_symlink(target, dst / name);
-            out.fields.push_back(field);
-            continue;
-        }
-        if (!h.found) { // not a field file: VTK decides
-            fs::create_symlink(target, dst / name);
-            continue;
-        }
-        if (h.object != name && !picked) {
-            out.leftOut.push_back(label + "/" + name + " (object " + h.object + ")");
-            continue;
-        }
-        out.fields.push_back(field);
-        if (h.cls.find("Vector") != std::string::npos) out.vectors.push_back(field);
-        if (h.format == "binary") {
-            if (h.object != name) { // picked by name: the copy carries its file name as object
-                writeFile(dst / name, renamedObject(readAll(e.path()), name));
-            } else {
-                fs::create_symlink(target, dst / name);
-            }
-            continue;
-        }
-        std::string text = readAll(e.path());
-        bool copy = h.object != name;
-        if (needsFoamExpansion(text, base.patches)) {
-            FoamDictContext ctx = base;
-            ctx.file = target;
-            text = expandFoamDictionary(text, ctx);
-            out.expanded.push_back(label + "/" + name);
-            copy = true;
-        }
-        if (!copy) {
-            fs::create_symlink(target, dst / name);
-            continue;
-        }
-        if (h.object != name) text = renamedObject(text, name);
-        writeFile(dst / name, text);
-    }
-}
-
-// ---- the shadow case ----------------------------------------------------------------------
-
-/// A temporary directory, removed with everything in it when this goes.
-class ShadowDir
-{
-public:
-    ShadowDir()
-    {
-        static std::atomic<unsigned> counter{0};
-        const fs::path base = fs::temp_directory_path();
-        for (int attempt = 0; attempt < 100; ++attempt) {
-            const fs::path p = base / ("licvdb-foam-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
-            std::error_code ec;
-            if (fs::create_directory(p, ec)) {
-                mPath = p;
-                return;
-            }
-        }
-        throw lic::Error("cannot make a temporary directory for an OpenFOAM case under " + q(base.string()));
-    }
-    ~ShadowDir()
-    {
-        std::error_code ec;
-        fs::remove_all(mPath, ec);
-    }
-    ShadowDir(const ShadowDir&) = delete;
-    ShadowDir& operator=(const ShadowDir&) = delete;
-    const fs::path& path() const { return mPath; }
-
-private:
-    fs::path mPath;
-};
-
-bool hasMesh(const fs::path& polyMesh)
-{
-    std::error_code ec;
-    return fs::exists(polyMesh / "faces", ec) || fs::exists(polyMesh / "faces.gz", ec);
-}
-
-/// The directory of `root` (the case, or a processor directory) whose polyMesh the time `timeName`
-/// uses: the latest time directory up to it with a polyMesh/faces, else constant. Empty if none.
-std::optional<std::string> meshInstance(const fs::path& root, double t)
-{
-    std::optional<std::string> best;
-    double bestT = -HUGE_VAL;
-    std::error_code ec;
-    for (const auto& e : fs::directory_iterator(root, ec)) {
-        if (!e.is_directory(ec)) continue;
-        const auto v = timeOfName(e.path().filename().string());
-        if (v && *v <= t + 1e-9 * std::max(1.0, std::abs(t)) && *v > bestT && hasMesh(e.path() / "polyMesh")) {
-            best = e.path().filename().string();
-            bestT = *v;
-        }
-    }
-    if (best) return best;
-    if (hasMesh(root / "constant" / "polyMesh")) return std::string("constant");
-    return std::nullopt;
-}
-
-/// Link `root`'s system/ and constant/ into `shadow`, the time directory the mesh comes from if
-/// it is a time directory, and make the shadow of the time `timeName`.
-void shadowRoot(const fs::path& root, const fs::path& shadow, const std::string& label, const std::string& timeName,
-                const std::string& meshDir, const std::string& wanted, const std::vector<fs::path>& etcDirs,
-                TimeFields& fields)
-{
-    std::error_code ec;
-    fs::create_directories(shadow);
-    for (const char* d : {"system", "constant"})
-        if (fs::is_directory(root / d, ec)) fs::create_directory_symlink(fs::absolute(root / d), shadow / d);
-    if (meshDir != "constant" && meshDir != timeName) {
-        fs::create_directory(shadow / meshDir);
-        fs::create_directory_symlink(fs::absolute(root / meshDir / "polyMesh"), shadow / meshDir / "polyMesh");
-    }
-    FoamDictContext ctx;
-    ctx.etcDirs = etcDirs;
-    const fs::path boundary = root / meshDir / "polyMesh" / "boundary";
-    if (fs::exists(boundary, ec)) ctx.patches = readFoamBoundary(boundary);
-    shadowTimeDir(root / timeName, shadow / timeName, (label.empty() ? "" : label + "/") + timeName, wanted, ctx, fields);
-}
-
-/// Replace the shadow's path by the case's in `text` (VTK's messages name the files it read).
-std::string unshadow(std::string text, const fs::path& shadow, const fs::path& caseDir)
-{
-    const std::string from = shadow.string(), to = fs::absolute(caseDir).lexically_normal().string();
-    for (std::size_t pos = 0; (pos = text.find(from, pos)) != std::string::npos; pos += to.size()) text.replace(pos, from.size(), to);
-    return text;
-}
 
 vtkSmartPointer<vtkOpenFOAMReader> makeReader(const fs::path& controlDict, bool decomposed, const std::string& path,
                                               const fs::path& shadow, const fs::path& caseDir)
@@ -637,8 +147,9 @@ vtkSmartPointer<vtkDataObject> mergedProcessors(vtkDataObject* data)
 
 std::string vecText(const double* v) { return "(" + num(v[0]) + " " + num(v[1]) + " " + num(v[2]) + ")"; }
 
-/// Warn when the velocity read is zero or the same vector everywhere.
-void checkNotUniform(vtkDataObject* data, const MeshOptions& options, const std::string& path, double t)
+/// A warning in `report` when the velocity read is zero or the same vector everywhere.
+void checkNotUniform(vtkDataObject* data, const MeshOptions& options, const std::string& path, double t,
+                     ReadReport& report)
 {
     const auto leaves = leavesOf(data);
     if (leaves.empty()) return;
@@ -670,28 +181,19 @@ void checkNotUniform(vtkDataObject* data, const MeshOptions& options, const std:
     if (!(spread <= 1e-9 * scale)) return;
     const std::string at = "at time " + num(t);
     if (scale == 0)
-        warn("the velocity " + name + " is zero everywhere " + at + " (an initial condition, not a solution?): the "
-             "field has no flow to draw");
+        report.warnings.push_back("the velocity " + name + " is zero everywhere " + at
+                                  + " (an initial condition, not a solution?): the field has no flow to draw");
     else
-        warn("the velocity " + name + " is uniform " + at + ", " + vecText(lo) + " in every cell (an initial condition, "
-             "not a solution?): its lines are straight and parallel");
+        report.warnings.push_back("the velocity " + name + " is uniform " + at + ", " + vecText(lo)
+                                  + " in every cell (an initial condition, not a solution?): its lines are straight "
+                                    "and parallel");
 }
 
 } // namespace
 
-ReadReportScope::ReadReportScope(ReadReport& report) : mPrevious(tReport) { tReport = &report; }
-ReadReportScope::~ReadReportScope() { tReport = mPrevious; }
-
-std::vector<double> openFoamTimes(const std::string& path)
-{
-    const FoamCase c = scanCase(path);
-    std::vector<double> t;
-    for (const auto& ft : c.times) t.push_back(ft.value);
-    return t;
-}
-
 vtkSmartPointer<vtkDataObject> readOpenFoam(const std::string& path, const MeshOptions& options,
-                                            std::optional<double>& timeRead, std::vector<double>& times)
+                                            std::optional<double>& timeRead, std::vector<double>& times,
+                                            ReadReport& report)
 {
     const FoamCase c = scanCase(path);
     if (c.times.empty())
@@ -700,10 +202,8 @@ vtkSmartPointer<vtkDataObject> readOpenFoam(const std::string& path, const MeshO
                                  + "): nothing to read");
     times.clear();
     for (const auto& ft : c.times) times.push_back(ft.value);
-    if (tReport) {
-        tReport->timeSources.clear();
-        for (const auto& ft : c.times) tReport->timeSources.push_back(sourceText(c, ft));
-    }
+    report.timeSources.clear();
+    for (const auto& ft : c.times) report.timeSources.push_back(sourceText(c, ft));
     const double t = chooseTime(times, options.time, path);
     const FoamTime& ft = *std::find_if(c.times.begin(), c.times.end(), [&](const FoamTime& x) { return x.value == t; });
     timeRead = t;
@@ -770,8 +270,8 @@ vtkSmartPointer<vtkDataObject> readOpenFoam(const std::string& path, const MeshO
     const std::string where = "time " + num(t) + " (read from " + source + ")";
     bool saidNoVelocity = false;
     auto noVelocity = [&](const std::string& what) { // an error, but for a description (--list)
-        if (!tReport || !tReport->describing) detail::inputError(path, what);
-        if (!saidNoVelocity) warn(what);
+        if (!report.describing) detail::inputError(path, what);
+        if (!saidNoVelocity) report.warnings.push_back(what);
         saidNoVelocity = true;
     };
     for (std::size_t i = 0; i < roots.size(); ++i) {
@@ -817,21 +317,23 @@ vtkSmartPointer<vtkDataObject> readOpenFoam(const std::string& path, const MeshO
                                      : " (only " + joinedList(with) + " of " + processorsText(c) + " have it)";
         }
     }
-    note(readNote);
+    report.notes.push_back(readNote);
     std::vector<std::string> leftOut, expanded;
     for (const auto& f : fields) {
         leftOut.insert(leftOut.end(), f.leftOut.begin(), f.leftOut.end());
         expanded.insert(expanded.end(), f.expanded.begin(), f.expanded.end());
     }
     if (!leftOut.empty())
-        note("left out " + joinedList(leftOut) + ": backups, or files whose header names another field (the field "
-             "named U is the file U; --grid FILE reads one by its file name)");
-    if (!expanded.empty()) note("expanded the dictionary directives of " + joinedList(expanded));
+        report.notes.push_back("left out " + joinedList(leftOut)
+                               + ": backups, or files whose header names another field (the field named U is the "
+                                 "file U; --grid FILE reads one by its file name)");
+    if (!expanded.empty()) report.notes.push_back("expanded the dictionary directives of " + joinedList(expanded));
     if (times.size() == 1 && times.front() == 0)
-        warn("the case has only its initial conditions (0/" + std::string(decomposed ? " in the processor directories" : "")
-             + "): no solver has written a time yet; run the solver first (e.g. `simpleFoam`, or `mpirun -np N "
-               "<solver> -parallel` for a decomposed case)");
-    checkNotUniform(data, options, path, t);
+        report.warnings.push_back("the case has only its initial conditions (0/"
+                                  + std::string(decomposed ? " in the processor directories" : "")
+                                  + "): no solver has written a time yet; run the solver first (e.g. `simpleFoam`, or "
+                                    "`mpirun -np N <solver> -parallel` for a decomposed case)");
+    checkNotUniform(data, options, path, t, report);
     return data;
 }
 

@@ -1,5 +1,5 @@
 // Reading each mesh format with VTK's readers: one file (.vtu, .vts, .vtm, .vtpc, legacy .vtk),
-// a .pvd collection (a time series of those), PLOT3D grid + solution; OpenFOAM in OpenFoam.cpp.
+// a .pvd collection (a time series of those), PLOT3D grid + solution; OpenFOAM in OpenFoam*.cpp.
 #include "io/mesh/Mesh.h"
 
 #include "io/DenseCommon.h"
@@ -175,11 +175,12 @@ double chooseTime(const std::vector<double>& times, const std::optional<double>&
 }
 
 vtkSmartPointer<vtkDataObject> readSingle(const std::string& path, const std::string& format, const MeshOptions& options,
-                                          std::optional<double>& timeRead, std::vector<double>& times)
+                                          std::optional<double>& timeRead, std::vector<double>& times,
+                                          ReadReport& report)
 {
     if (auto data = readOneFile(path, format)) return *data;
     if (format == "plot3d") return readPlot3d(path, options);
-    if (format == "openfoam") return readOpenFoam(path, options, timeRead, times);
+    if (format == "openfoam") return readOpenFoam(path, options, timeRead, times, report);
     if (format == "pvd") {
         const auto entries = parsePvd(path);
         for (const auto& e : entries) times.push_back(e.time);

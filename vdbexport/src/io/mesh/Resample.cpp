@@ -1,6 +1,6 @@
 // A checked mesh resampled onto the VDB lattice. The lattice covers the (cropped) bounds, its upper
 // faces included, with a voxel to spare on every side; VTK's probe (vtkResampleToImage) tells which
-// lattice points lie inside a cell: those are active, and (kVoxelBand) a one-voxel band around them
+// lattice points lie inside a cell: those are active, and so is a one-voxel band around them
 // (every corner of a lattice cell that touches the fluid), so that trilinear sampling anywhere in
 // the fluid finds its 8 corners active. Values: cell data by a weighted least-squares linear fit over the nearest
 // cell centres, limited to the neighbours' range (not VTK's cell-to-point averaging, which smears
@@ -62,15 +62,8 @@ void onProgress(vtkObject* caller, unsigned long, void* client, void* data)
     }
 }
 
-/// The one-voxel band around the fluid and the default voxel size for LIC (issue 54 item 4). Off
-/// until the mesh tests that assert the old behaviour (no active voxel outside the mesh; the
-/// default voxel size is the median cell size) are revised: with them off, the inside voxels and
-/// the default are as before.
-constexpr bool kVoxelBand = false;
-constexpr bool kLicVoxelSize = false;
-
 /// The default voxel size's budget: at most this many lattice points (and options.maxVoxels).
-constexpr double kDefaultVoxelBudget = 64.0 * 1024 * 1024;
+constexpr double kDefaultVoxelBudget = 16.0 * 1024 * 1024;
 
 /// The cube root of each cell's bounding-box volume (its largest edge for a flat cell), over a
 /// sample of at most ~200 000 cells, sorted.
@@ -115,14 +108,10 @@ double voxelCount(const std::array<std::array<double, 3>, 2>& box, double h)
 /// The default voxel size for LIC: half the 10th percentile of the cell sizes (so the smaller
 /// cells, which are where the passages are narrow and the walls near, get two voxels each), at most
 /// a quarter of the smallest extent of the box (five lattice points across its thinnest side);
-/// then, if that makes more than min(64 Mi, maxVoxels) lattice points, the smallest size that fits.
+/// then, if that makes more than min(16 Mi, maxVoxels) lattice points, the smallest size that fits.
 double defaultVoxelSize(const Mesh& m, const std::array<std::array<double, 3>, 2>& box, double maxVoxels,
                         std::string& rule)
 {
-    if (!kLicVoxelSize) {
-        rule = "the median cell size";
-        return medianCellSize(m.leaves);
-    }
     const std::vector<double> sizes = cellSizes(m.leaves);
     if (sizes.empty()) return 0;
     const double p10 = sizes[sizes.size() / 10];
@@ -143,19 +132,31 @@ double defaultVoxelSize(const Mesh& m, const std::array<std::array<double, 3>, 2
     return h;
 }
 
-Lattice chooseLattice(const Mesh& m, const MeshOptions& options, const std::string& path)
+/// The box the lattice covers: the mesh's bounds, cropped.
+std::array<std::array<double, 3>, 2> latticeBox(const Mesh& m, const MeshOptions& options, const std::string& path)
 {
-    Lattice l;
-    l.box = boundsOf(m.leaves);
+    std::array<std::array<double, 3>, 2> box = boundsOf(m.leaves);
     if (options.crop) {
         for (int a = 0; a < 3; ++a) {
-            l.box[0][a] = std::max(l.box[0][a], (*options.crop)[0][a]);
-            l.box[1][a] = std::min(l.box[1][a], (*options.crop)[1][a]);
-            if (!(l.box[1][a] > l.box[0][a]))
+            box[0][a] = std::max(box[0][a], (*options.crop)[0][a]);
+            box[1][a] = std::min(box[1][a], (*options.crop)[1][a]);
+            if (!(box[1][a] > box[0][a]))
                 detail::inputError(path, std::string("the crop box misses the mesh along ") + "xyz"[a]);
         }
     }
-    const double maxVoxels = double(std::min<std::uint64_t>(options.maxVoxels, kMaxDenseVoxels));
+    return box;
+}
+
+double maxLatticeVoxels(const MeshOptions& options)
+{
+    return double(std::min<std::uint64_t>(options.maxVoxels, kMaxDenseVoxels));
+}
+
+Lattice chooseLattice(const Mesh& m, const MeshOptions& options, const std::string& path)
+{
+    Lattice l;
+    l.box = latticeBox(m, options, path);
+    const double maxVoxels = maxLatticeVoxels(options);
     l.h = options.voxelSize ? *options.voxelSize : defaultVoxelSize(m, l.box, maxVoxels, l.rule);
     if (!(l.h > 0) || !std::isfinite(l.h)) detail::inputError(path, "has degenerate cells (zero size): pass --voxel-size");
     double voxels = 1;
@@ -231,7 +232,6 @@ std::vector<char> activeLattice(const Mesh& m, const Lattice& l, vtkDataArray* m
             for (vtkIdType i = 1; i + 1 < nx; ++i)
                 inside[std::size_t(i + nx * (j + ny * k))] =
                     mask->GetComponent((i - 1) + px * ((j - 1) + py * (k - 1)), 0) != 0;
-    if (!kVoxelBand) return inside;
     std::vector<char> cellTouches(std::size_t(n), 0); // lattice cell (i,j,k): [i,i+1]×[j,j+1]×[k,k+1]
     auto index = [&](vtkIdType i, vtkIdType j, vtkIdType k) { return std::size_t(i + nx * (j + ny * k)); };
     for (vtkIdType k = 0; k < nz; ++k)
@@ -459,27 +459,10 @@ void fitValues(const Sources& s, std::vector<Output*>& outs, const std::vector<v
     });
 }
 
-} // namespace
-
-
-LoadedField loadMesh(const std::string& path, const std::string& format, const MeshOptions& options,
-                     const std::string& nanPolicy)
+/// The outputs: the velocity, then every one-component array of the mesh (by name, sorted) that
+/// every leaf holds with that many components.
+std::vector<Output> outputsOf(const Mesh& m, vtkImageData* image, const std::string& velocityName, const std::string& path)
 {
-    openvdb::initialize();
-    Mesh m = readMesh(path, format, options);
-    const std::string velocityName = chooseVelocity(m.leaves, options.vectorName, path);
-    LoadedField out;
-    out.format = format;
-    out.nonFiniteReplaced = checkVelocityValues(m.leaves, velocityName, nanPolicy, path);
-    const Lattice l = chooseLattice(m, options, path);
-    std::string maskName;
-    const vtkSmartPointer<vtkImageData> image = probe(m, l, options, path, format, maskName);
-    vtkDataArray* mask = image->GetPointData()->GetArray(maskName.c_str());
-    if (!mask) detail::inputError(path, "VTK's resampling lost its mask");
-    std::vector<char> inside;
-    const std::vector<char> active = activeLattice(m, l, mask, inside);
-
-    // The outputs: the velocity, then every one-component array in every leaf.
     std::vector<Output> outs;
     auto addOutput = [&](const std::string& name, int components) {
         Output o;
@@ -515,6 +498,37 @@ LoadedField loadMesh(const std::string& path, const std::string& format, const M
         names.erase(std::unique(names.begin(), names.end()), names.end());
         for (const auto& n : names) addOutput(n, 1);
     }
+
+    return outs;
+}
+
+} // namespace
+
+double defaultLatticeVoxelSize(const Mesh& m, const MeshOptions& options, const std::string& path, std::string& rule)
+{
+    return defaultVoxelSize(m, latticeBox(m, options, path), maxLatticeVoxels(options), rule);
+}
+
+LoadedField loadMesh(const std::string& path, const std::string& format, const MeshOptions& options,
+                     const std::string& nanPolicy)
+{
+    openvdb::initialize();
+    Mesh m = readMesh(path, format, options);
+    const std::string velocityName = chooseVelocity(m.leaves, options.vectorName, path);
+    LoadedField out;
+    out.format = format;
+    out.notes = m.report.notes; // the read's (OpenFOAM: where the time came from): before the resampling's
+    out.warnings = m.report.warnings;
+    out.nonFiniteReplaced = checkVelocityValues(m.leaves, velocityName, nanPolicy, path);
+    const Lattice l = chooseLattice(m, options, path);
+    std::string maskName;
+    const vtkSmartPointer<vtkImageData> image = probe(m, l, options, path, format, maskName);
+    vtkDataArray* mask = image->GetPointData()->GetArray(maskName.c_str());
+    if (!mask) detail::inputError(path, "VTK's resampling lost its mask");
+    std::vector<char> inside;
+    const std::vector<char> active = activeLattice(m, l, mask, inside);
+
+    std::vector<Output> outs = outputsOf(m, image, velocityName, path);
 
     // The active lattice points, in lattice order; the values of each output there.
     std::vector<vtkIdType> lattice;
