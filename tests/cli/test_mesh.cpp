@@ -5,6 +5,7 @@
 // vorticity 2Ω. Then `licvdb convert` (series, metadata, --list), `bake` reading a mesh, bit-
 // identical output for 1 and 2 threads, and the bad inputs (exit 2, a message, no file).
 #include "InputsHarness.h"
+#include "CellFit.h"
 #include "MeshSamples.h"
 
 #include "vdbexport/io/FieldInput.h"
@@ -16,11 +17,10 @@
 
 #include <openvdb/tools/GridOperators.h>
 #include <tbb/global_control.h>
-#include <vtkDoubleArray.h>
-#include <vtkOpenFOAMReader.h>
 #include <vtkUnsignedCharArray.h>
 
 #include <cstdlib>
+#include <functional>
 #include <random>
 #include <set>
 
@@ -32,27 +32,44 @@ namespace {
 struct Accuracy
 {
     std::uint64_t active = 0;
-    double relError = 0;        ///< Σ|u - exact| / Σ|exact| over the active voxels
+    double relError = 0;        ///< Σ|u - exact| / Σ|exact| over the active voxels inside the mesh
     double interiorCovered = 0; ///< active fraction of the voxels well inside the annulus
-    std::uint64_t exteriorActive = 0; ///< active voxels clearly outside it (or in its hole)
+    std::uint64_t band = 0;     ///< active voxels outside the mesh but within a voxel of it
+    double bandRelError = 0;    ///< Σ|u - exact| / Σ|exact| over those (the flow extended)
+    std::uint64_t exteriorActive = 0; ///< active voxels more than a voxel outside it (or in its hole)
     std::uint64_t exteriorVoxels = 0;
 };
 
 /// Compare a resampled field with the flow. `margin`: how far inside the annulus a voxel must be to
-/// count as interior (the mesh's boundary is stair-stepped or polygonal).
+/// count as interior (the mesh's boundary is stair-stepped or polygonal). The lattice carries a
+/// band of one voxel around the fluid (so that trilinear sampling anywhere inside finds its 8
+/// corners active): a voxel counts as exterior when it is more than a voxel diagonal outside.
 Accuracy accuracy(const openvdb::Vec3SGrid& g, double margin, double omega = kOmega)
 {
     Accuracy a;
-    double err = 0, norm = 0;
     const auto& xf = g.transform();
+    const double reach = std::sqrt(3.0) * xf.voxelSize()[0] + 0.01;
+    auto outside = [](const openvdb::Vec3d& p, double by) {
+        const double r = std::hypot(p.x(), p.y());
+        return r > kOuter + by || r < kInner - by || p.z() < -by || p.z() > kHeight + by;
+    };
+    double err = 0, norm = 0, bandErr = 0, bandNorm = 0;
     for (auto it = g.cbeginValueOn(); it; ++it) {
         const openvdb::Vec3d p = xf.indexToWorld(it.getCoord());
         const openvdb::Vec3d exact = flow(p, omega);
-        err += (openvdb::Vec3d(*it) - exact).length();
-        norm += exact.length();
+        const double e = (openvdb::Vec3d(*it) - exact).length();
         ++a.active;
+        if (outside(p, 0.01)) {
+            ++a.band;
+            bandErr += e;
+            bandNorm += exact.length();
+        } else {
+            err += e;
+            norm += exact.length();
+        }
     }
     a.relError = norm > 0 ? err / norm : 1;
+    a.bandRelError = bandNorm > 0 ? bandErr / bandNorm : 0;
     // Every voxel centre of the lattice around the mesh.
     openvdb::CoordBBox box = g.evalActiveVoxelBoundingBox();
     box.expand(3);
@@ -66,7 +83,7 @@ Accuracy accuracy(const openvdb::Vec3SGrid& g, double margin, double omega = kOm
             ++interior;
             covered += active;
         }
-        if (r > kOuter + 0.01 || r < kInner - 0.01 || p.z() < -0.01 || p.z() > kHeight + 0.01) {
+        if (outside(p, reach)) {
             ++a.exteriorVoxels;
             a.exteriorActive += active;
         }
@@ -84,9 +101,12 @@ void expectAccurate(const vdbexport::LoadedField& f, double margin, const std::s
     EXPECT_LE(a.relError, 0.01) << "mean relative error";
     EXPECT_EQ(a.interiorCovered, 1.0) << "interior voxels inactive";
     EXPECT_GT(a.exteriorVoxels, 1000u);
-    EXPECT_EQ(a.exteriorActive, 0u) << "voxels outside the mesh (or in its hole) active";
+    EXPECT_EQ(a.exteriorActive, 0u) << "voxels more than a voxel outside the mesh (or in its hole) active";
+    EXPECT_GT(a.band, 0u) << "no band of voxels around the fluid";
+    EXPECT_LE(a.bandRelError, 0.1) << "the band's values against the flow extended";
     for (const auto& n : f.notes) std::cout << "  " << what << ": " << n << "\n";
-    std::cout << "  " << what << ": mean relative error " << a.relError << ", " << a.active << " active voxels\n";
+    std::cout << "  " << what << ": mean relative error " << a.relError << " inside, " << a.bandRelError << " in the band; "
+              << a.active << " active voxels, " << a.band << " of them in the band\n";
 }
 
 vdbexport::LoadedField load(const fs::path& path, double voxelSize, const std::string& format = "auto")
@@ -98,8 +118,10 @@ vdbexport::LoadedField load(const fs::path& path, double voxelSize, const std::s
     return vdbexport::loadField(spec);
 }
 
-/// Mean of the z component of the curl over voxels whose six neighbours are active.
-double meanCurlZ(const openvdb::Vec3SGrid& g)
+/// Mean of the z component of the curl over voxels whose neighbours (two each way along each axis)
+/// are active and, given `inside`, inside the fluid (not in the band around it, which carries the
+/// wall's values rather than the flow's derivatives).
+double meanCurlZ(const openvdb::Vec3SGrid& g, const std::function<bool(const openvdb::Vec3d&)>& inside = {})
 {
     auto curl = openvdb::tools::curl(g);
     auto acc = g.getConstAccessor();
@@ -112,7 +134,7 @@ double meanCurlZ(const openvdb::Vec3SGrid& g)
             for (int s : {-2, -1, 1, 2}) {
                 openvdb::Coord d = c;
                 d[a] += s;
-                inner = inner && acc.isValueOn(d);
+                inner = inner && acc.isValueOn(d) && (!inside || inside(g.transform().indexToWorld(d)));
             }
         if (!inner) continue;
         sum += curl->tree().getValue(c).z();
@@ -194,42 +216,59 @@ TEST_F(MeshTest, MultiBlockPartitionedAndLegacyMatchTheFlow)
 
 TEST_F(MeshTest, OpenFoamCaseMatchesTheFlow)
 {
-    // A box: every voxel of it is interior; the annulus' exterior checks do not apply.
+    // A box: every voxel of it is interior; the annulus' exterior checks do not apply. The box's
+    // 41³ lattice points at 0.05 are all active and within 1 % of the flow; around them, the band of
+    // one voxel on every side (43³ in all) and nothing further out.
     writeOpenFoamCase(work("case"), 20, {"0"}, {kOmega});
     const auto f = load(work("case"), 0.05);
     EXPECT_EQ(f.format, "openfoam");
     ASSERT_TRUE(f.velocity);
     double err = 0, norm = 0;
+    std::uint64_t inBox = 0, band = 0, far = 0;
+    const double eps = 1e-6, reach = std::sqrt(3.0) * 0.05 + eps;
     for (auto it = f.velocity->cbeginValueOn(); it; ++it) {
-        const auto exact = flow(f.velocity->transform().indexToWorld(it.getCoord()));
-        err += (openvdb::Vec3d(*it) - exact).length();
-        norm += exact.length();
+        const openvdb::Vec3d p = f.velocity->transform().indexToWorld(it.getCoord());
+        const auto beyond = [&](double by) {
+            return std::abs(p.x()) > 1 + by || std::abs(p.y()) > 1 + by || p.z() < -by || p.z() > 2 + by;
+        };
+        if (beyond(reach)) ++far;
+        else if (beyond(eps)) ++band;
+        else {
+            ++inBox;
+            const auto exact = flow(p);
+            err += (openvdb::Vec3d(*it) - exact).length();
+            norm += exact.length();
+        }
     }
     const openvdb::Coord dim = f.velocity->evalActiveVoxelDim();
-    EXPECT_EQ(f.velocity->activeVoxelCount(), openvdb::Index64(41) * 41 * 41) << dim; // [-1,1]²×[0,2] at 0.05
+    EXPECT_EQ(inBox, openvdb::Index64(41) * 41 * 41) << dim; // [-1,1]²×[0,2] at 0.05
+    EXPECT_EQ(far, 0u) << "voxels more than a voxel outside the box active";
+    EXPECT_EQ(inBox + band, openvdb::Index64(43) * 43 * 43) << "the band of one voxel around the box";
     EXPECT_LE(err / norm, 0.01) << "mean relative error";
-    EXPECT_NEAR(meanCurlZ(*f.velocity), 2 * kOmega, 0.02 * 2 * kOmega);
+    const auto inBoxFn = [&](const openvdb::Vec3d& p) {
+        return std::abs(p.x()) <= 1 + eps && std::abs(p.y()) <= 1 + eps && p.z() >= -eps && p.z() <= 2 + eps;
+    };
+    EXPECT_NEAR(meanCurlZ(*f.velocity, inBoxFn), 2 * kOmega, 0.02 * 2 * kOmega);
     std::cout << "  OpenFOAM: mean relative error " << err / norm << "\n";
 }
 
-TEST_F(MeshTest, VoxelSizeDefaultsToTheMedianCellSize)
+TEST_F(MeshTest, DescribeReportsCellsArraysAndTheMedianCellSize)
 {
+    // The default voxel size itself (not the median any more) is TheDefaultVoxelSizeIsForLic's.
     writeVtu(hexAnnulus(20), work("hex.vtu"));
     vdbexport::MeshOptions o;
     const auto s = vdbexport::describeMesh(work("hex.vtu").string(), "vtu", o);
     EXPECT_NEAR(s.medianCellSize, std::cbrt(0.1 * 0.1 * 0.1), 1e-9); // 2/20 wide, 2/20 tall
-    const auto f = vdbexport::loadMesh(work("hex.vtu").string(), "vtu", o);
-    EXPECT_NEAR(f.velocity->voxelSize()[0], s.medianCellSize, 1e-12);
     EXPECT_GT(s.cells, 1000u);
     std::set<std::string> names;
     for (const auto& a : s.arrays) names.insert(a.name);
     EXPECT_EQ(names, (std::set<std::string>{"U", "speed"}));
 }
 
-TEST_F(MeshTest, CellDataAreAveragedToPoints)
+TEST_F(MeshTest, CellDataReachTheLatticeByAFitOverCellCentres)
 {
-    // U on the cells only: the resampled field is still within 2% (averaging smooths the linear part
-    // exactly inside and costs accuracy only at the boundary) and continuous.
+    // U on the cells only: the resampled field is still within 2% (the linear fit over the nearest
+    // cell centres is exact for the flow's linear part; it costs accuracy only at the boundary).
     auto grid = hexAnnulus(24);
     auto cellU = vectorArray("velocity", grid->GetNumberOfCells());
     for (vtkIdType c = 0; c < grid->GetNumberOfCells(); ++c) {
@@ -246,6 +285,7 @@ TEST_F(MeshTest, CellDataAreAveragedToPoints)
     const Accuracy a = accuracy(*f.velocity, 0.16);
     EXPECT_LE(a.relError, 0.02);
     EXPECT_EQ(a.exteriorActive, 0u);
+    EXPECT_LE(a.bandRelError, 0.1);
     bool noted = false;
     for (const auto& n : f.notes) noted = noted || n.find("cell data") != std::string::npos;
     EXPECT_TRUE(noted);
@@ -579,96 +619,6 @@ INSTANTIATE_TEST_SUITE_P(Cases, BadMeshTest, ::testing::Range<std::size_t>(0, ba
 
 namespace {
 
-/// How a resampled field reads back at the cells of the mesh it came from.
-struct CellFit
-{
-    double pointsCovered = 0; ///< random points inside cells whose 8 trilinear corners are active
-    double pointsNearest = 0; ///< ... whose nearest voxel is active
-    double centresCovered = 0; ///< cell centres whose 8 trilinear corners are active
-    double relError = 0;      ///< Σ|trilinear(centre) - cell value| / Σ|cell value| over the covered centres
-    double speedRatio = 0;    ///< mean |trilinear(centre)| / mean |cell value| over the covered centres
-    std::uint64_t cells = 0;
-};
-
-/// The trilinear value of `g` at world position p, and whether its 8 corners are active.
-bool trilinear(const openvdb::Vec3SGrid& g, const openvdb::Vec3d& p, openvdb::Vec3d& value)
-{
-    const openvdb::Vec3d x = g.transform().worldToIndex(p);
-    const openvdb::Coord c0(int(std::floor(x.x())), int(std::floor(x.y())), int(std::floor(x.z())));
-    const openvdb::Vec3d f = x - openvdb::Vec3d(c0.x(), c0.y(), c0.z());
-    auto acc = g.getConstAccessor();
-    bool all = true;
-    value = openvdb::Vec3d(0.0);
-    for (int k = 0; k < 2; ++k)
-        for (int j = 0; j < 2; ++j)
-            for (int i = 0; i < 2; ++i) {
-                const openvdb::Coord c = c0.offsetBy(i, j, k);
-                all = all && acc.isValueOn(c);
-                const double w = (i ? f.x() : 1 - f.x()) * (j ? f.y() : 1 - f.y()) * (k ? f.z() : 1 - f.z());
-                value += w * openvdb::Vec3d(acc.getValue(c));
-            }
-    return all;
-}
-
-/// Compare `g` with the cell values `array` of `mesh` at the cells' centres (mean of their points),
-/// and count how much of the cells' volume (random points between a centre and a corner) is covered.
-CellFit fitToCells(const openvdb::Vec3SGrid& g, vtkDataSet* mesh, const char* array)
-{
-    CellFit fit;
-    vtkDataArray* u = mesh->GetCellData()->GetArray(array);
-    EXPECT_TRUE(u) << array;
-    if (!u) return fit;
-    std::mt19937 rng(54);
-    std::uniform_real_distribution<double> unit(0.0, 0.95);
-    double err = 0, norm = 0, speed = 0, cellSpeed = 0;
-    std::uint64_t covered = 0, points = 0, pointsCovered = 0, pointsNearest = 0;
-    auto acc = g.getConstAccessor();
-    vtkNew<vtkIdList> ids;
-    for (vtkIdType c = 0; c < mesh->GetNumberOfCells(); ++c) {
-        mesh->GetCellPoints(c, ids);
-        openvdb::Vec3d centre(0.0);
-        double p[3];
-        for (vtkIdType i = 0; i < ids->GetNumberOfIds(); ++i) {
-            mesh->GetPoint(ids->GetId(i), p);
-            centre += openvdb::Vec3d(p[0], p[1], p[2]);
-        }
-        centre /= double(ids->GetNumberOfIds());
-        ++fit.cells;
-        for (int r = 0; r < 2; ++r) { // two random points per cell, between the centre and a corner
-            mesh->GetPoint(ids->GetId(vtkIdType(rng() % std::uint32_t(ids->GetNumberOfIds()))), p);
-            const openvdb::Vec3d q = centre + unit(rng) * (openvdb::Vec3d(p[0], p[1], p[2]) - centre);
-            openvdb::Vec3d v;
-            ++points;
-            pointsCovered += trilinear(g, q, v);
-            pointsNearest += acc.isValueOn(openvdb::Coord::round(g.transform().worldToIndex(q)));
-        }
-        openvdb::Vec3d v;
-        if (!trilinear(g, centre, v)) continue;
-        ++covered;
-        const openvdb::Vec3d cell(u->GetComponent(c, 0), u->GetComponent(c, 1), u->GetComponent(c, 2));
-        err += (v - cell).length();
-        norm += cell.length();
-        speed += v.length();
-        cellSpeed += cell.length();
-    }
-    fit.pointsCovered = double(pointsCovered) / double(std::max<std::uint64_t>(1, points));
-    fit.pointsNearest = double(pointsNearest) / double(std::max<std::uint64_t>(1, points));
-    fit.centresCovered = double(covered) / double(std::max<std::uint64_t>(1, fit.cells));
-    fit.relError = norm > 0 ? err / norm : 1;
-    fit.speedRatio = cellSpeed > 0 ? speed / cellSpeed : 0;
-    return fit;
-}
-
-void printFit(const std::string& what, const vdbexport::LoadedField& f, const CellFit& fit)
-{
-    std::cout << "  " << what << ": voxel " << f.velocity->voxelSize()[0] << ", " << f.velocity->activeVoxelCount()
-              << " active; random points: " << 100 * fit.pointsCovered << " % with 8 corners active ("
-              << 100 * fit.pointsNearest << " % nearest voxel active); centres covered " << 100 * fit.centresCovered
-              << " %, mean relative error " << 100 * fit.relError << " %, mean speed " << 100 * fit.speedRatio
-              << " % of the cells'\n";
-    for (const auto& n : f.notes) std::cout << "    " << n << "\n";
-}
-
 /// `grid` with U on its cells only (the flow at each cell's centre, the mean of its points).
 template<typename GridT>
 vtkSmartPointer<GridT> withCellFlow(vtkSmartPointer<GridT> grid)
@@ -706,6 +656,8 @@ TEST_F(MeshTest, CellDataReadBackAtTheCellCentres)
     const CellFit fit = fitToCells(*f.velocity, grid, "U");
     printFit("coarse annulus, cell data, voxel 0.07", f, fit);
     EXPECT_GE(fit.centresCovered, 0.5);
+    // Measured 1.16 % (the axial profile is quadratic in r, which a linear fit over 8 centres of
+    // cells 0.17 wide cannot follow exactly); bound at 2 %, against 4.3 % for the averaging before.
     EXPECT_LE(fit.relError, 0.02);
     EXPECT_NEAR(fit.speedRatio, 1.0, 0.01);
     bool noted = false;
@@ -774,42 +726,56 @@ TEST_F(MeshTest, SyntheticCellDataReadBackAtTheCellCentres)
     }
 }
 
-TEST_F(MeshTest, RealOpenFoamCasesReadBackAtTheCellCentres)
+// ---- the band and the default voxel size for LIC (Resample.cpp) ----
+
+TEST_F(MeshTest, TheBandCoversTheFluidAndNoMore)
 {
-    // Measuring, not asserting: the cases tests/openfoam/make_cases.sh makes (LICVDB_OPENFOAM_CASES,
-    // else /var/cache/licvdb/openfoam), at the default voxel size.
-    const char* env = std::getenv("LICVDB_OPENFOAM_CASES");
-    const fs::path dir = env && *env ? fs::path(env) : fs::path("/var/cache/licvdb/openfoam");
-    int measured = 0;
-    for (const char* name : {"TJunction", "pipeCyclic", "boxTurb16"}) {
-        const fs::path c = dir / name;
-        if (!fs::exists(c / "system" / "controlDict")) continue;
-        vtkNew<vtkOpenFOAMReader> r;
-        r->SetFileName((c / "system" / "controlDict").c_str());
-        r->SkipZeroTimeOff();
-        r->DecomposePolyhedraOff();
-        r->UpdateInformation();
-        r->EnableAllCellArrays();
-        for (int i = 0; i < r->GetNumberOfPatchArrays(); ++i)
-            r->SetPatchArrayStatus(r->GetPatchArrayName(i), std::string(r->GetPatchArrayName(i)) == "internalMesh");
-        vtkDoubleArray* tv = r->GetTimeValues();
-        ASSERT_TRUE(tv && tv->GetNumberOfTuples() > 0);
-        r->UpdateTimeStep(tv->GetValue(tv->GetNumberOfTuples() - 1));
-        auto* blocks = vtkMultiBlockDataSet::SafeDownCast(r->GetOutput());
-        ASSERT_TRUE(blocks && blocks->GetNumberOfBlocks() > 0);
-        vtkDataSet* mesh = vtkDataSet::SafeDownCast(blocks->GetBlock(0));
-        ASSERT_TRUE(mesh);
-        vdbexport::FieldSpec spec;
-        spec.path = c.string();
-        const auto f = vdbexport::loadField(spec);
-        printFit(std::string(name) + " (default voxel size)", f, fitToCells(*f.velocity, mesh, "U"));
-        spec.voxelSize = vdbexport::describeMesh(c.string(), "openfoam", vdbexport::MeshOptions{}).medianCellSize;
-        const auto median = vdbexport::loadField(spec);
-        printFit(std::string(name) + " (the median cell size)", median, fitToCells(*median.velocity, mesh, "U"));
-        spec.voxelSize = 0.87 * f.velocity->voxelSize()[0]; // lattice points off the cell centres
-        const auto off = vdbexport::loadField(spec);
-        printFit(std::string(name) + " (0.87 x the default)", off, fitToCells(*off.velocity, mesh, "U"));
-        ++measured;
+    // The stair-stepped annulus (24 cells across) with U on the points, at voxel 0.04: every random
+    // point inside its cells has its 8 trilinear corners active; no voxel more than one voxel
+    // diagonal outside it (or in its hole) is active; the band's values follow the flow, not zeros.
+    const double h = 0.04;
+    auto grid = hexAnnulus(24);
+    writeVtu(grid, work("hex.vtu"));
+    const auto f = load(work("hex.vtu"), h);
+    ASSERT_TRUE(f.velocity);
+    const CellFit fit = fitToCells(*f.velocity, withCellFlow(hexAnnulus(24)), "U");
+    printFit("hex annulus, point data, voxel 0.04", f, fit);
+    EXPECT_EQ(fit.pointsCovered, 1.0);
+    const double reach = std::sqrt(3.0) * h + 1e-9;
+    std::uint64_t far = 0, band = 0;
+    double err = 0, norm = 0;
+    for (auto it = f.velocity->cbeginValueOn(); it; ++it) {
+        const openvdb::Vec3d p = f.velocity->transform().indexToWorld(it.getCoord());
+        const double r = std::hypot(p.x(), p.y());
+        far += r > kOuter + reach || r < kInner - reach || p.z() < -reach || p.z() > kHeight + reach;
+        if (r > kOuter || r < kInner || p.z() < 0 || p.z() > kHeight) {
+            ++band;
+            err += (openvdb::Vec3d(*it) - flow(p)).length();
+            norm += flow(p).length();
+        }
     }
-    if (!measured) GTEST_SKIP() << "NOT RUN: no OpenFOAM cases in " << dir << " (tests/openfoam/make_cases.sh DIR)";
+    EXPECT_EQ(far, 0u) << "voxels more than a voxel outside the mesh active";
+    EXPECT_GT(band, 1000u);
+    EXPECT_LE(err / norm, 0.1) << "the band's values against the flow extended";
+    std::cout << "  band: " << band << " voxels outside the annulus, mean relative error " << err / norm << "\n";
+}
+
+TEST_F(MeshTest, TheDefaultVoxelSizeIsForLic)
+{
+    // Cells 0.1 on a side: the default is half the 10th percentile of the cell sizes, 0.05; with a
+    // voxel budget too small for it, the smallest size within the budget (not a refusal).
+    writeVtu(hexAnnulus(20), work("hex.vtu"));
+    vdbexport::MeshOptions o;
+    const auto f = vdbexport::loadMesh(work("hex.vtu").string(), "vtu", o);
+    EXPECT_NEAR(f.velocity->voxelSize()[0], 0.05, 1e-6); // the cells' bounds are in single precision
+    const auto s = vdbexport::describeMesh(work("hex.vtu").string(), "vtu", o); // what convert --list shows
+    EXPECT_EQ(s.defaultVoxelSize, f.velocity->voxelSize()[0]);
+    EXPECT_EQ(s.voxelSizeRule, "half the 10th percentile of the cell sizes");
+    o.maxVoxels = 20000;
+    const auto small = vdbexport::loadMesh(work("hex.vtu").string(), "vtu", o);
+    const double hs = small.velocity->voxelSize()[0];
+    EXPECT_GT(hs, 0.05);
+    const double lattice = std::pow(std::ceil(2.0 / hs - 1e-9) + 3, 2) * (std::ceil(kHeight / hs - 1e-9) + 3);
+    EXPECT_LE(lattice, 20000.0);
+    EXPECT_GT(lattice, 20000.0 / 1.5) << "the smallest size within the budget, roughly";
 }

@@ -120,7 +120,7 @@ void BakeCommand::addFieldFlags()
 {
     RecipeFlags& f = *mFlags;
     f.option<std::string>("--format", "field.format", "Field format: " + joined(choices().formats) + " [auto: by extension]");
-    f.option<double>("--voxel-size", "field.voxel_size", "Dense inputs (npy, raw, vti, vtk): world units per voxel [file's, else 1]; meshes: the lattice's voxel size [median cell size]");
+    f.option<double>("--voxel-size", "field.voxel_size", "Dense inputs (npy, raw, vti, vtk): world units per voxel [file's, else 1]; meshes: the lattice's voxel size [for LIC: half the 10th percentile of the cell sizes, within a budget]");
     f.option<double>("--time", "field.time", "A series (.pvd, OpenFOAM case): the time to read [the latest]");
     f.text("--solution", "field.solution", "PLOT3D: the solution (.q) file [the grid's name with .q]");
     f.text("--origin", "field.origin", "Dense inputs: world position X,Y,Z of voxel (0,0,0)'s centre [file's, else 0]",

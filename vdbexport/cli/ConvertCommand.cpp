@@ -56,7 +56,7 @@ void ConvertCommand::addOptions(CLI::App& cmd)
     cmd.add_option("-o,--out", mOut, "Output .vdb; for a series, a pattern with #### for the time step's index");
     cmd.add_option("--format", mFormat, "Input format: " + inputFormatHelp() + " [auto: by extension]");
     cmd.add_option("--grid", mGrid, "Velocity array (default: U, velocity, vel, v, the only vector array)");
-    mVoxelOption = cmd.add_option("--voxel-size", mVoxelSize, "Voxel size of the lattice, world units [median cell size]")
+    mVoxelOption = cmd.add_option("--voxel-size", mVoxelSize, "Voxel size of the lattice, world units [for LIC: half the 10th percentile of the cell sizes, within a budget; --list shows it]")
                        ->check(CLI::PositiveNumber);
     cmd.add_option("--crop", mCrop, "Resample inside world box X0,Y0,Z0,X1,Y1,Z1 only [the mesh's bounds]");
     mTimeOption = cmd.add_option("--time", mTime, "A series: the time to convert [the latest]");
@@ -65,7 +65,7 @@ void ConvertCommand::addOptions(CLI::App& cmd)
     cmd.add_option("--solution", mSolution, "PLOT3D: the solution (.q) file [the grid's name with .q]");
     cmd.add_option("--nan-policy", mNan, "refuse|zero: NaN/Inf velocity is an error, or set to 0 [refuse]")
         ->check(CLI::IsMember({"refuse", "zero"}));
-    cmd.add_flag("--list", mList, "Print the mesh's cells, bounds, median cell size, arrays and times, and write nothing");
+    cmd.add_flag("--list", mList, "Print the mesh's cells, bounds, cell sizes, default voxel size, arrays and times, and write nothing");
     addCommonOptions(cmd, mCommon);
     cmd.footer("The output has a Vec3 grid `velocity` (the velocity array resampled) and one float grid per scalar\n"
                "array, active on the voxels inside the mesh; metadata source, source_format, source_array and\n"
@@ -134,7 +134,8 @@ int ConvertCommand::list(const std::string& format) const
     if (mTimeOption->count()) options.time = mTime;
     const MeshSummary s = describeMesh(mInput, format, options);
     json j{{"input", mInput}, {"format", s.format}, {"cells", s.cells}, {"points", s.points}, {"blocks", s.blocks},
-           {"bounds", s.bounds}, {"median_cell_size", s.medianCellSize}, {"times", s.times}, {"arrays", json::array()}};
+           {"bounds", s.bounds}, {"median_cell_size", s.medianCellSize},
+           {"default_voxel_size", s.defaultVoxelSize}, {"voxel_size_rule", s.voxelSizeRule}, {"times", s.times}, {"arrays", json::array()}};
     if (s.time) j["time"] = *s.time;
     if (!s.timeSources.empty()) j["time_sources"] = s.timeSources;
     j["warnings"] = s.warnings;
@@ -148,7 +149,8 @@ int ConvertCommand::list(const std::string& format) const
               << (s.blocks > 1 ? ", " + std::to_string(s.blocks) + " blocks" : "") << "\n";
     std::cout << "  bounds (" << s.bounds[0][0] << ", " << s.bounds[0][1] << ", " << s.bounds[0][2] << ") to ("
               << s.bounds[1][0] << ", " << s.bounds[1][1] << ", " << s.bounds[1][2] << ")\n";
-    std::cout << "  median cell size " << s.medianCellSize << " (the default --voxel-size)\n";
+    std::cout << "  median cell size " << s.medianCellSize << "; default --voxel-size " << s.defaultVoxelSize << " ("
+              << s.voxelSizeRule << ")\n";
     for (const auto& a : s.arrays)
         std::cout << "  array " << a.name << ": " << a.components << " component(s) on the " << (a.cellData ? "cells" : "points")
                   << "\n";

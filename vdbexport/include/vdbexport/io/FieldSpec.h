@@ -18,7 +18,8 @@ struct FieldSpec
     std::string format = "auto";
     /// `voxel_size`: world units per voxel of a dense input (npy, raw; overrides a VTK file's
     /// spacing), > 0; null = the file's own, else 1. For a mesh: the lattice it is resampled
-    /// onto; null = its median cell size
+    /// onto; null = the default for LIC (docs/inputs.md: half the 10th percentile of the cell sizes,
+    /// within a budget)
     std::optional<double> voxelSize;
     /// `time`: the time of a series (.pvd, OpenFOAM case) to read; null = the latest
     std::optional<double> time;

@@ -23,7 +23,7 @@ namespace vdbexport {
 struct MeshOptions
 {
     std::string vectorName;          ///< velocity array; "" = U, velocity, vel, v, else the only vector
-    std::optional<double> voxelSize; ///< lattice spacing, world units; null = the median cell size
+    std::optional<double> voxelSize; ///< lattice spacing, world units; null = the default for LIC
     /// Resample inside this world box only (intersected with the mesh's bounds); null = the mesh's
     std::optional<std::array<std::array<double, 3>, 2>> crop;
     std::optional<double> time;      ///< time value of a series (.pvd, OpenFOAM); null = the latest
@@ -50,7 +50,9 @@ struct MeshSummary
     std::uint64_t cells = 0, points = 0;
     std::size_t blocks = 0;                    ///< non-empty datasets (1 for a single mesh)
     std::array<std::array<double, 3>, 2> bounds{};
-    double medianCellSize = 0;                 ///< the default voxel size
+    double medianCellSize = 0;                 ///< median over the cells of the cube root of their box's volume
+    double defaultVoxelSize = 0;               ///< the lattice's voxel size when none is given
+    std::string voxelSizeRule;                 ///< which part of the default's rule chose it
     std::vector<double> times;                 ///< time values of a series; empty for one mesh
     std::optional<double> time;                ///< the time read
     /// Per time of `times`, where it is read from (OpenFOAM: "2 processor directories", "the top
@@ -78,10 +80,10 @@ std::vector<double> meshTimes(const std::string& path, const std::string& format
 MeshSummary describeMesh(const std::string& path, const std::string& format, const MeshOptions& options);
 
 /// @brief Read the mesh at `path` and resample it onto a lattice of voxel size options.voxelSize
-///        (or the median cell size) whose voxel (0,0,0) sits at the low corner of the bounds:
-///        the velocity array becomes a Vec3SGrid, every scalar array a FloatGrid, all active on
-///        the voxels inside the mesh. Cell data are averaged to the points first (so values are
-///        interpolated within cells). The grids carry the source in metadata (`source`,
+///        (or the default for LIC: docs/inputs.md) whose voxel (0,0,0) sits at the low corner of
+///        the bounds: the velocity array becomes a Vec3SGrid, every scalar array a FloatGrid, all
+///        active on the voxels inside the mesh and a one-voxel band around them. Cell data reach
+///        the lattice by a weighted least-squares linear fit over the nearest cell centres. The grids carry the source in metadata (`source`,
 ///        `source_format`, `source_array`, `source_time` for series).
 /// @throw lic::InputError naming the file and the problem: unreadable or truncated file, no
 ///        cells, degenerate bounds, no or ambiguous velocity array, an array whose tuple count
