@@ -77,13 +77,14 @@ def test_bake_file_of_a_vtu_mesh(mesh):
     out = bpy.path.abspath(obj.data.filepath)
     assert os.path.dirname(out) == str(mesh.parent / "licvdb")
     assert mf.read_manifest(obj.licvdb.manifest).recipe["field"]["path"] == str(mesh)
-    # The lattice covers the mesh's box, [0, 1]³ (voxel centres on its faces), and the object
+    # The lattice covers the mesh's box, [0, 1]³ (voxel centres on its faces), and the band of one
+    # voxel around the fluid (so trilinear sampling inside finds all 8 corners), and the object
     # adds no transform of its own beyond the import's placement.
     info = json.loads(run_licvdb("info", out, "--json"))
     density = next(g for g in info["grids"] if g["name"] == "density")
     h = density["voxel_size"][0]
     lo, hi = density["world_bbox"]
-    assert lo == pytest.approx([-h / 2] * 3, abs=1e-6) and hi == pytest.approx([1 + h / 2] * 3, abs=1e-6)
+    assert lo == pytest.approx([-1.5 * h] * 3, abs=1e-6) and hi == pytest.approx([1 + 1.5 * h] * 3, abs=1e-6)
     assert obj.matrix_world.to_translation() == Vector(obj.licvdb.placement_shift)
 
 
