@@ -282,10 +282,9 @@ std::uint64_t checkVelocityValues(const std::vector<vtkSmartPointer<vtkDataSet>>
     return bad;
 }
 
-/// The median over (a sample of) the cells of the cube root of each cell's bounding-box volume
-/// (its largest edge for a flat box): the edge of a hexahedron, and of the cube a tetrahedron
-/// was cut from.
-double medianCellSize(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves)
+/// The cube root of each cell's bounding-box volume (its largest edge for a flat cell), over a
+/// sample of at most ~200 000 cells, sorted.
+std::vector<double> cellSizes(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves)
 {
     vtkIdType total = 0;
     for (const auto& ds : leaves) total += ds->GetNumberOfCells();
@@ -300,10 +299,17 @@ double medianCellSize(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves)
             const double s = vol > 0 ? std::cbrt(vol) : std::max({dx, dy, dz});
             if (s > 0 && std::isfinite(s)) sizes.push_back(s);
         }
-    if (sizes.empty()) return 0;
-    auto mid = sizes.begin() + std::ptrdiff_t(sizes.size() / 2);
-    std::nth_element(sizes.begin(), mid, sizes.end());
-    return *mid;
+    std::sort(sizes.begin(), sizes.end());
+    return sizes;
+}
+
+/// The median over (a sample of) the cells of the cube root of each cell's bounding-box volume
+/// (its largest edge for a flat box): the edge of a hexahedron, and of the cube a tetrahedron
+/// was cut from.
+double medianCellSize(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves)
+{
+    const std::vector<double> sizes = cellSizes(leaves); // sorted
+    return sizes.empty() ? 0 : sizes[sizes.size() / 2];
 }
 
 std::array<std::array<double, 3>, 2> boundsOf(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves)

@@ -101,6 +101,9 @@ std::string chooseVelocity(const std::vector<vtkSmartPointer<vtkDataSet>>& leave
 /// NaN/Inf in the velocity: refused with the first offender, or set to zero (returns how many).
 std::uint64_t checkVelocityValues(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves, const std::string& name,
                                   const std::string& nanPolicy, const std::string& path);
+/// The cube root of each cell's bounding-box volume (its largest edge for a flat cell), over a
+/// sample of at most ~200 000 cells, sorted.
+std::vector<double> cellSizes(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves);
 /// The median over (a sample of) the cells of the cube root of each cell's bounding-box volume.
 double medianCellSize(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves);
 /// The lattice's voxel size when none is given (the default for LIC, docs/inputs.md), and in

@@ -65,27 +65,6 @@ void onProgress(vtkObject* caller, unsigned long, void* client, void* data)
 /// The default voxel size's budget: at most this many lattice points (and options.maxVoxels).
 constexpr double kDefaultVoxelBudget = 16.0 * 1024 * 1024;
 
-/// The cube root of each cell's bounding-box volume (its largest edge for a flat cell), over a
-/// sample of at most ~200 000 cells, sorted.
-std::vector<double> cellSizes(const std::vector<vtkSmartPointer<vtkDataSet>>& leaves)
-{
-    vtkIdType total = 0;
-    for (const auto& ds : leaves) total += ds->GetNumberOfCells();
-    const vtkIdType step = std::max<vtkIdType>(1, total / 200000);
-    std::vector<double> sizes;
-    double b[6];
-    for (const auto& ds : leaves)
-        for (vtkIdType c = 0; c < ds->GetNumberOfCells(); c += step) {
-            ds->GetCellBounds(c, b);
-            const double dx = b[1] - b[0], dy = b[3] - b[2], dz = b[5] - b[4];
-            const double vol = dx * dy * dz;
-            const double s = vol > 0 ? std::cbrt(vol) : std::max({dx, dy, dz});
-            if (s > 0 && std::isfinite(s)) sizes.push_back(s);
-        }
-    std::sort(sizes.begin(), sizes.end());
-    return sizes;
-}
-
 /// The lattice the mesh is resampled onto: voxel (0,0,0) one voxel below the low corner of the
 /// (cropped) bounds, `h` apart, reaching at least one voxel past the upper corner.
 struct Lattice
