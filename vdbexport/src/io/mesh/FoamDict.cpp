@@ -46,7 +46,7 @@ void writeDict(std::string& out, const Dict& d, int indent, bool headerFirst)
         if (order.empty() || e.get() != order.front()) order.push_back(e.get());
     for (const Entry* e : order) {
         out += pad;
-        out += e->pattern ? q(e->key) : e->key;
+        out += e->pattern ? dq(e->key) : e->key;
         if (e->dict) {
             out += "\n" + pad + "{\n";
             writeDict(out, *e->dict, indent + 1, false);
@@ -75,7 +75,7 @@ void normalised(std::string& out, const std::string& text)
 void flatten(const Dict& d, const std::string& prefix, std::vector<std::pair<std::string, std::string>>& out)
 {
     for (const auto& e : d.entries) {
-        const std::string key = prefix + (e->pattern ? q(e->key) : e->key);
+        const std::string key = prefix + (e->pattern ? dq(e->key) : e->key);
         if (e->dict) {
             flatten(*e->dict, key + "/", out);
             continue;

@@ -91,7 +91,7 @@ void Expander::rewriteBoundary(Dict& root)
         } else {
             std::string groups;
             for (const auto& g : patch.groups) groups += (groups.empty() ? "" : " ") + g;
-            fail(where(bf->src, bf->line) + ": boundaryField has no entry for patch " + q(patch.name) + " (type " +
+            fail(where(bf->src, bf->line) + ": boundaryField has no entry for patch " + dq(patch.name) + " (type " +
                  patch.type + (groups.empty() ? "" : ", groups " + groups) +
                  "): OpenFOAM would not read this field either");
         }
@@ -147,7 +147,7 @@ std::vector<FoamPatch> readFoamBoundary(const fs::path& boundaryFile)
     std::vector<FoamPatch> patches;
     for (t = lx.next(); !t.is(')'); t = lx.next()) {
         if (t.kind != Tok::Word && t.kind != Tok::String) fail(where(t) + ": expected a patch name in the boundary file");
-        if (!lx.next().is('{')) fail(where(t) + ": expected '{' after patch " + q(t.text));
+        if (!lx.next().is('{')) fail(where(t) + ": expected '{' after patch " + dq(t.text));
         Dict d;
         ex.parseEntries(d, lx, 1, 0, true, false);
         FoamPatch p;

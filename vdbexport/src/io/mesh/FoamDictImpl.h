@@ -62,7 +62,7 @@ std::string where(const Token& t);
 /// A string token's text without its quotes (anything else as it is).
 std::string unquote(const std::string& s);
 /// `s` in double quotes: a "regex" key as written, a name in a message.
-std::string q(const std::string& s);
+std::string dq(const std::string& s);
 
 /// Tokens as OpenFOAM's ISstream reads them; a list of numbers and words is one Raw token.
 class Lexer

@@ -89,7 +89,7 @@ std::optional<const Source*> Expander::includeSource(const Dict& scope, Lexer& l
     const Token arg = lx.next();
     if (arg.kind != Tok::String && arg.kind != Tok::Word)
         fail(where(directive) + ": " + name + " expects a file name, found " +
-             (arg.kind == Tok::End ? std::string("the end of the file") : q(arg.text)));
+             (arg.kind == Tok::End ? std::string("the end of the file") : dq(arg.text)));
     if (fileDepth >= kMaxIncludeDepth)
         fail(where(directive) + ": " + name + " " + arg.text + ": includes nested more than " +
              std::to_string(kMaxIncludeDepth) + " deep (does a file include itself?)");

@@ -34,7 +34,7 @@ std::string unquote(const std::string& s)
     return s.size() >= 2 && s.front() == '"' && s.back() == '"' ? s.substr(1, s.size() - 2) : s;
 }
 
-std::string q(const std::string& s) { return "\"" + s + "\""; }
+std::string dq(const std::string& s) { return "\"" + s + "\""; }
 
 Token Lexer::next()
 {

@@ -253,7 +253,7 @@ void Expander::parseEntries(Dict& d, Lexer& lx, int dictDepth, int fileDepth, bo
             continue;
         }
         if (t.kind != Tok::Word && t.kind != Tok::String)
-            fail(where(t) + ": expected a keyword, found " + q(t.text.substr(0, 40)));
+            fail(where(t) + ": expected a keyword, found " + dq(t.text.substr(0, 40)));
         auto e = std::make_unique<Entry>();
         e->pattern = t.kind == Tok::String;
         e->key = e->pattern ? unquote(t.text) : t.text;

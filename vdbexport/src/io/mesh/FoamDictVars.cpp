@@ -114,7 +114,7 @@ std::string Expander::expandString(const Dict& scope, const std::string& s, cons
         std::size_t j = i + 1;
         if (j < s.size() && s[j] == '{') {
             const std::size_t e = s.find('}', j);
-            if (e == std::string::npos) fail(where(at) + ": unterminated ${ in " + q(s));
+            if (e == std::string::npos) fail(where(at) + ": unterminated ${ in " + dq(s));
             name = s.substr(j + 1, e - j - 1);
             j = e + 1;
         } else {
@@ -134,7 +134,7 @@ std::string Expander::expandString(const Dict& scope, const std::string& s, cons
         } else if (const char* env = name.empty() ? nullptr : std::getenv(name.c_str())) {
             out += env;
         } else {
-            fail(where(at) + ": $" + name + " in " + q(s) + " is neither an entry nor an environment variable");
+            fail(where(at) + ": $" + name + " in " + dq(s) + " is neither an entry nor an environment variable");
         }
     }
     return out;
@@ -152,7 +152,7 @@ void Expander::appendDictTokens(const Dict& d, const Token& at, std::vector<Toke
         out.push_back(std::move(t));
     };
     for (const auto& e : d.entries) {
-        push(e->pattern ? Tok::String : Tok::Word, e->pattern ? q(e->key) : e->key);
+        push(e->pattern ? Tok::String : Tok::Word, e->pattern ? dq(e->key) : e->key);
         if (e->dict) {
             push(Tok::Punct, "{");
             appendDictTokens(*e->dict, at, out, depth + 1);
