@@ -50,6 +50,22 @@ int launcherRank()
     return 1;
 }
 
+/// Open MPI on one node: use the ob1 messaging layer (shared memory between the ranks) unless
+/// the job chose one ($OMPI_MCA_pml, as `mpirun --mca pml …` sets it). Open MPI's default
+/// selection also opens the `cm` layer and its network libraries (PSM, PSM2, OFI), which only
+/// serve between nodes and cost ~0.2 s of MPI_Init per job here (docs/distributed.md);
+/// ob1 over shared memory is what it picks on one node anyway. Read by MPI_Init from this
+/// process's environment, so it must be set before. $LICVDB_MPI_PML=keep leaves the choice to
+/// Open MPI (its configuration files included).
+[[maybe_unused]] void preferSharedMemoryOnOneNode()
+{
+    const char* size = env("OMPI_COMM_WORLD_SIZE");
+    const char* local = env("OMPI_COMM_WORLD_LOCAL_SIZE");
+    if (!size || !local || std::string(size) != local || env("OMPI_MCA_pml")) return;
+    if (const char* keep = env("LICVDB_MPI_PML"); keep && std::string(keep) == "keep") return;
+    ::setenv("OMPI_MCA_pml", "ob1", /*overwrite=*/0);
+}
+
 } // namespace
 
 // ------------------------------------------------------------------------------------------
@@ -71,6 +87,7 @@ void MpiSession::start(int& argc, char**& argv)
     const bool launched = launcherRank() >= 0;
     if (off || (!on && !launched)) return;
 #ifdef LICVDB_WITH_MPI
+    preferSharedMemoryOnOneNode();
     int provided = 0;
     if (MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided) != MPI_SUCCESS)
         throw lic::Error("MPI failed to start (MPI_Init_thread); run without mpirun, or set LICVDB_MPI=0");
@@ -220,14 +237,25 @@ template<typename GridT>
 std::string packLeaves(const GridT& grid)
 {
     using LeafT = typename GridT::TreeType::LeafNodeType;
+    using ValueT = typename GridT::ValueType;
+    constexpr std::size_t kMaskBytes = LeafT::NodeMaskType::WORD_COUNT * sizeof(std::uint64_t);
     std::string out;
+    std::size_t bytes = sizeof(std::uint64_t);
+    for (auto leaf = grid.tree().cbeginLeaf(); leaf; ++leaf)
+        bytes += 3 * sizeof(std::int32_t) + kMaskBytes + leaf->onVoxelCount() * sizeof(ValueT);
+    out.reserve(bytes);
     put(out, std::uint64_t(grid.tree().leafCount()));
     for (auto leaf = grid.tree().cbeginLeaf(); leaf; ++leaf) {
         const openvdb::Coord o = leaf->origin();
         for (int a = 0; a < 3; ++a) put(out, std::int32_t(o[a]));
         for (openvdb::Index w = 0; w < LeafT::NodeMaskType::WORD_COUNT; ++w)
             put(out, leaf->getValueMask().template getWord<std::uint64_t>(w));
-        for (auto it = leaf->cbeginValueOn(); it; ++it) put(out, *it);
+        if (leaf->getValueMask().isOn() && leaf->buffer().data()) {
+            // Every voxel active (a dense bake's leaves): the values in offset order are the buffer.
+            out.append(reinterpret_cast<const char*>(leaf->buffer().data()), LeafT::SIZE * sizeof(ValueT));
+        } else {
+            for (auto it = leaf->cbeginValueOn(); it; ++it) put(out, *it);
+        }
     }
     return out;
 }
@@ -250,7 +278,16 @@ void unpackLeaves(GridT& grid, const std::string& in)
                              std::to_string(o[2]) + ") of grid " + grid.getName() + " came from two ranks");
         }
         auto leaf = std::make_unique<LeafT>(o, openvdb::zeroVal<ValueT>(), false);
-        for (auto it = mask.beginOn(); it; ++it) leaf->setValueOn(it.pos(), take<ValueT>(in, at));
+        if (mask.isOn()) {
+            // Every voxel active: the values are the buffer, in offset order.
+            constexpr std::size_t n = LeafT::SIZE * sizeof(ValueT);
+            if (at + n > in.size()) throw lic::Error("truncated leaf message");
+            std::memcpy(static_cast<void*>(leaf->buffer().data()), in.data() + at, n);
+            at += n;
+            leaf->setValueMask(mask);
+        } else {
+            for (auto it = mask.beginOn(); it; ++it) leaf->setValueOn(it.pos(), take<ValueT>(in, at));
+        }
         grid.tree().addLeaf(leaf.release());
     }
     if (at != in.size()) throw lic::Error("leaf message of grid " + grid.getName() + " has trailing bytes");
