@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Interpolation.h>
 
 #include <cmath>
 #include <cstring>
@@ -488,6 +489,93 @@ TEST(Render, BitIdenticalForAnyThreadCountAndWithOrWithoutSkipping)
     const Image img = rc.render(makeCamera(cs, rc.worldBBox()), nullProgress(), &st);
     EXPECT_GT(st.samples, 0u);
     for (std::size_t i = 0; i < img.rgba.size(); ++i) ASSERT_NEAR(img.rgba[i], ref.rgba[i], 1e-6f) << i;
+}
+
+// The raycaster reads the trees where they are: a region held as tiles renders exactly as the
+// same region held as voxels (the tile path of the cell reads and of the brick table).
+TEST(Render, TilesRenderAsTheirVoxels)
+{
+    openvdb::initialize();
+    auto tiles = openvdb::FloatGrid::create(0.0f);
+    tiles->setTransform(openvdb::math::Transform::createLinearTransform(0.5));
+    tiles->setName("density");
+    // 16³ voxels of 0.3 as tiles of 8³ (leaf-aligned), plus a few single voxels beside them.
+    tiles->tree().fill(openvdb::CoordBBox(openvdb::Coord(-8), openvdb::Coord(7)), 0.3f, true);
+    tiles->tree().setValueOn(openvdb::Coord(9, 2, 3), 0.8f);
+    tiles->tree().setValueOn(openvdb::Coord(-10, 0, 0), 0.6f);
+    ASSERT_GT(tiles->tree().activeTileCount(), 0u);
+    auto voxels = tiles->deepCopy();
+    voxels->tree().voxelizeActiveTiles();
+    ASSERT_EQ(voxels->tree().activeTileCount(), 0u);
+    CameraSettings cs;
+    cs.azimuth = 27;
+    cs.elevation = 14;
+    cs.width = 40;
+    cs.height = 30;
+    RenderVolume a, b;
+    a.density = tiles;
+    b.density = voxels;
+    const HaloRaycaster ra(a, RenderSettings{}), rb(b, RenderSettings{});
+    EXPECT_EQ(ra.settings().densityScale, rb.settings().densityScale); // auto: the same sum over the box
+    const Camera cam = makeCamera(cs, ra.worldBBox());
+    const Image ia = ra.render(cam), ib = rb.render(cam);
+    double sum = 0;
+    for (float v : ib.rgba) sum += v;
+    ASSERT_GT(sum, 1.0) << "the test image must not be empty";
+    ASSERT_EQ(0, std::memcmp(ia.rgba.data(), ib.rgba.data(), ia.rgba.size() * sizeof(float)));
+}
+
+// A grid with another transform is sampled trilinearly at the centres of the density grid's
+// voxels: the image equals that of a grid resampled so by hand.
+TEST(Render, GridsWithAnotherTransformAreResampledOntoTheDensityVoxels)
+{
+    auto d = makeScalar("density", 0.5, {-12, -12, -12}, {12, 12, 12},
+                        [](const Vec3d& p) { return p.length() < 4.0 ? 0.7 : 0.0; });
+    // Colour on a finer, shifted lattice.
+    auto fine = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+    auto xf = openvdb::math::Transform::createLinearTransform(0.3);
+    xf->postTranslate(Vec3d(0.07, -0.11, 0.05));
+    fine->setTransform(xf);
+    fine->setName("color");
+    {
+        auto acc = fine->getAccessor();
+        for (int i = -18; i <= 18; ++i)
+            for (int j = -18; j <= 18; ++j)
+                for (int k = -18; k <= 18; ++k) {
+                    const Vec3d p = xf->indexToWorld(openvdb::Coord(i, j, k));
+                    acc.setValueOn(openvdb::Coord(i, j, k),
+                                   openvdb::Vec3s(float(0.5 + 0.1 * p[0]), float(0.5 + 0.1 * p[1]), float(0.5 - 0.1 * p[2])));
+                }
+    }
+    // By hand: on density's voxels over its active box, padded by 2.
+    auto hand = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+    hand->setTransform(d->transform().copy());
+    hand->setName("color");
+    {
+        openvdb::CoordBBox box = d->evalActiveVoxelBoundingBox();
+        box.expand(2);
+        auto src = fine->getConstAccessor();
+        openvdb::tools::GridSampler<decltype(src), openvdb::tools::BoxSampler> sampler(src, fine->transform());
+        auto acc = hand->getAccessor();
+        for (auto ijk = box.begin(); ijk; ++ijk)
+            acc.setValueOn(*ijk, sampler.wsSample(d->transform().indexToWorld(*ijk)));
+    }
+    RenderVolume a, b;
+    a.density = b.density = d;
+    a.color = fine;
+    b.color = hand;
+    CameraSettings cs;
+    cs.azimuth = 40;
+    cs.elevation = 25;
+    cs.width = 36;
+    cs.height = 36;
+    const HaloRaycaster ra(a, exact()), rb(b, exact());
+    const Camera cam = makeCamera(cs, ra.worldBBox());
+    const Image ia = ra.render(cam), ib = rb.render(cam);
+    double sum = 0;
+    for (float v : ib.rgba) sum += v;
+    ASSERT_GT(sum, 1.0) << "the test image must not be empty";
+    ASSERT_EQ(0, std::memcmp(ia.rgba.data(), ib.rgba.data(), ia.rgba.size() * sizeof(float)));
 }
 
 TEST(Render, RefusesBadInput)

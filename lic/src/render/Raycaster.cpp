@@ -1,9 +1,9 @@
 #include "lic/render/Raycaster.h"
 
+#include "LeafTable.h"
 #include "lic/util/Error.h"
 #include "lic/util/Parallel.h"
 
-#include <openvdb/tools/Dense.h>
 #include <openvdb/tools/Interpolation.h>
 
 #include <tbb/blocked_range.h>
@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <sstream>
 
@@ -63,31 +64,54 @@ constexpr double kAutoDepth = 2.5;
 constexpr double kAutoLineScale = 2.0;
 constexpr int kTile = 32;
 
-/// Copy (same transform) or resample (trilinear, world space) `grid` onto the voxels of `bbox`
-/// in `target`'s index space, x fastest.
-template<typename GridT>
-void fillDense(const GridT& grid, const openvdb::math::Transform& target, const openvdb::CoordBBox& bbox,
-               typename GridT::ValueType* out)
+template<typename T>
+bool sameBits(const T& a, const T& b)
 {
+    return std::memcmp(&a, &b, sizeof(T)) == 0;
+}
+
+/// `grid` on the voxels of `target`'s index space: the grid itself when the transforms are equal
+/// (shared, not copied); otherwise a new sparse grid that holds, at each voxel of `box`, the
+/// trilinear world-space sample of `grid` at the voxel's centre. Its leaves are only the blocks
+/// with a value other than `grid`'s background, which it takes as its own, so reading it anywhere
+/// in `box` gives those samples.
+template<typename GridT>
+typename GridT::ConstPtr onVoxelsOf(const typename GridT::ConstPtr& grid, const openvdb::math::Transform& target,
+                                    const openvdb::CoordBBox& box)
+{
+    if (grid->transform() == target) return grid;
+    using LeafT = typename GridT::TreeType::LeafNodeType;
     using ValueT = typename GridT::ValueType;
-    if (grid.transform() == target) {
-        openvdb::tools::Dense<ValueT, openvdb::tools::LayoutXYZ> dense(bbox, out);
-        openvdb::tools::copyToDense(grid, dense);
-        return;
-    }
-    const openvdb::Coord dim = bbox.dim();
-    tbb::parallel_for(tbb::blocked_range<int>(0, dim[2]), [&](const tbb::blocked_range<int>& r) {
-        auto acc = grid.getConstAccessor();
-        openvdb::tools::GridSampler<decltype(acc), openvdb::tools::BoxSampler> sampler(acc, grid.transform());
-        for (int k = r.begin(); k != r.end(); ++k)
-            for (int j = 0; j < dim[1]; ++j)
-                for (int i = 0; i < dim[0]; ++i) {
-                    const openvdb::Vec3d w =
-                        target.indexToWorld(openvdb::Vec3d(bbox.min()[0] + i, bbox.min()[1] + j, bbox.min()[2] + k));
-                    out[std::size_t(i) + std::size_t(dim[0]) * (std::size_t(j) + std::size_t(dim[1]) * std::size_t(k))] =
-                        sampler.wsSample(w);
-                }
+    constexpr int dim = int(LeafT::DIM);
+    const ValueT bg = grid->background();
+    const openvdb::Coord lo(box.min().x() & ~(dim - 1), box.min().y() & ~(dim - 1), box.min().z() & ~(dim - 1));
+    const std::size_t n[3] = {std::size_t((box.max().x() - lo.x()) / dim + 1), std::size_t((box.max().y() - lo.y()) / dim + 1),
+                              std::size_t((box.max().z() - lo.z()) / dim + 1)};
+    std::vector<std::unique_ptr<LeafT>> leaves(n[0] * n[1] * n[2]);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
+        auto acc = grid->getConstAccessor();
+        openvdb::tools::GridSampler<decltype(acc), openvdb::tools::BoxSampler> sampler(acc, grid->transform());
+        for (std::size_t b = r.begin(); b != r.end(); ++b) {
+            const openvdb::Coord o =
+                lo.offsetBy(int(b % n[0]) * dim, int(b / n[0] % n[1]) * dim, int(b / (n[0] * n[1])) * dim);
+            openvdb::CoordBBox cell = openvdb::CoordBBox::createCube(o, dim);
+            cell.intersect(box);
+            std::unique_ptr<LeafT> leaf;
+            for (auto ijk = cell.begin(); ijk; ++ijk) {
+                const ValueT v = sampler.wsSample(target.indexToWorld((*ijk).asVec3d()));
+                if (sameBits(v, bg)) continue;
+                if (!leaf) leaf = std::make_unique<LeafT>(o, bg, false);
+                leaf->setValueOn(*ijk, v);
+            }
+            leaves[b] = std::move(leaf);
+        }
     });
+    auto out = GridT::create(bg);
+    out->setTransform(target.copy());
+    out->setName(grid->getName());
+    for (auto& leaf : leaves)
+        if (leaf) out->tree().addLeaf(leaf.release());
+    return out;
 }
 
 void requireLinear(const openvdb::GridBase& g)
@@ -143,14 +167,172 @@ std::vector<openvdb::Vec3s> colormapTable(const Colormap& map)
     return lut;
 }
 
-/// `f(i)` for every i in [0, n), in parallel.
-template<typename F>
-void forEachVoxel(std::size_t n, const F& f)
+/// `f(leaf)` for every leaf of `tree`, in parallel, and `g(bbox, value)` for every tile (active
+/// or not; not the background outside the root's tiles), serially.
+template<typename TreeT, typename F, typename G>
+void forEachLeafAndTile(const TreeT& tree, const F& f, const G& g)
 {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 16), [&](const auto& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
+    std::vector<const typename TreeT::LeafNodeType*> leaves;
+    tree.getNodes(leaves);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) f(*leaves[i]);
     });
+    auto it = tree.cbeginValueAll();
+    it.setMaxDepth(TreeT::ValueAllCIter::LEAF_DEPTH - 1);
+    for (; it; ++it) {
+        openvdb::CoordBBox b;
+        it.getBoundingBox(b);
+        g(b, *it);
+    }
 }
+
+/// Σ clamp((v − lo)·inv, 0, 1) over the voxels of `box` (leaves, tiles and background alike), in
+/// an order that does not depend on threads: leaf by leaf in the tree's order, then tiles, then
+/// the background's voxels.
+double windowedSum(const openvdb::FloatTree& tree, const openvdb::CoordBBox& box, double lo, double inv)
+{
+    auto w = [&](float v) { return std::clamp((double(v) - lo) * inv, 0.0, 1.0); };
+    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    tree.getNodes(leaves);
+    std::vector<double> sums(leaves.size(), 0.0);
+    std::vector<std::uint64_t> counts(leaves.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            openvdb::CoordBBox b = leaves[i]->getNodeBoundingBox();
+            const bool inside = box.isInside(b);
+            b.intersect(box);
+            if (b.empty()) continue;
+            double acc = 0.0;
+            if (inside) { // the usual case: the buffer in order
+                const float* v = leaves[i]->buffer().data();
+                for (int k = 0; k < 512; ++k) acc += w(v[k]);
+            } else {
+                for (auto ijk = b.begin(); ijk; ++ijk) acc += w(leaves[i]->getValue(*ijk));
+            }
+            sums[i] = acc;
+            counts[i] = b.volume();
+        }
+    });
+    double sum = 0.0;
+    std::uint64_t counted = 0;
+    for (std::size_t i = 0; i < leaves.size(); ++i) {
+        sum += sums[i];
+        counted += counts[i];
+    }
+    auto it = tree.cbeginValueAll();
+    it.setMaxDepth(openvdb::FloatTree::ValueAllCIter::LEAF_DEPTH - 1);
+    for (; it; ++it) {
+        openvdb::CoordBBox b;
+        it.getBoundingBox(b);
+        b.intersect(box);
+        if (b.empty()) continue;
+        sum += double(b.volume()) * w(*it);
+        counted += b.volume();
+    }
+    return sum + double(box.volume() - counted) * w(tree.background());
+}
+
+/// Which 8³ bricks of samples can contribute (empty-space skipping). Brick b (local index space,
+/// local 0 = `origin`) covers samples [8b, 8b + 8) and reads voxels [8b, 8b + 8] of the box.
+class BrickTable
+{
+public:
+    BrickTable() = default;
+    BrickTable(const openvdb::CoordBBox& box, const openvdb::Vec3d& extent) : mBox(box)
+    {
+        for (int a = 0; a < 3; ++a) mCount[a] = int(std::floor(extent[a] / kBrick)) + 1;
+        mActive.assign(std::size_t(mCount[0]) * std::size_t(mCount[1]) * std::size_t(mCount[2]), 0);
+    }
+    int count(int axis) const { return mCount[axis]; }
+    bool active(std::size_t brick) const { return mActive[brick] != 0; }
+
+    /// Mark the bricks that read a voxel of `tree` above `threshold`.
+    template<typename TreeT>
+    void mark(const TreeT& tree, float threshold)
+    {
+        if (tree.background() > threshold) {
+            std::fill(mActive.begin(), mActive.end(), std::uint8_t(1));
+            return;
+        }
+        forEachLeafAndTile(
+            tree, [&](const typename TreeT::LeafNodeType& leaf) { markLeaf(leaf, threshold); },
+            [&](const openvdb::CoordBBox& b, float v) {
+                if (v > threshold) markVoxels(b);
+            });
+    }
+
+private:
+    /// The bricks b0..b1 (per axis) that read some voxel of `voxels` (in the box).
+    void brickRange(const openvdb::CoordBBox& voxels, int* b0, int* b1) const
+    {
+        for (int a = 0; a < 3; ++a) {
+            const int l0 = voxels.min()[a] - mBox.min()[a], l1 = voxels.max()[a] - mBox.min()[a]; // ≥ 0
+            b0[a] = std::max(0, (l0 + kBrick - 1) / kBrick - 1);
+            b1[a] = std::min(mCount[a] - 1, l1 / kBrick);
+        }
+    }
+
+    void set(int a, int b, int c)
+    {
+        const std::size_t i = std::size_t(a) + std::size_t(mCount[0]) * (std::size_t(b) + std::size_t(mCount[1]) * std::size_t(c));
+        std::atomic_ref<std::uint8_t>(mActive[i]).store(1, std::memory_order_relaxed);
+    }
+
+    /// Mark the bricks that read a voxel of `leaf` above `threshold`: a bit per voxel above it
+    /// (z bits per (x, y) column), then, for each of the ≤ 3³ bricks over the leaf, whether any
+    /// column in its range has a bit in its z range. Thread-safe.
+    template<typename LeafT>
+    void markLeaf(const LeafT& leaf, float threshold)
+    {
+        openvdb::CoordBBox lb = leaf.getNodeBoundingBox();
+        const openvdb::Coord o = lb.min();
+        lb.intersect(mBox);
+        if (lb.empty()) return;
+        std::uint8_t column[8][8] = {};
+        bool any = false;
+        const float* v = leaf.buffer().data();
+        for (int i = 0; i < 512; ++i)
+            if (v[i] > threshold) {
+                column[i >> 6][(i >> 3) & 7] |= std::uint8_t(1u << (i & 7));
+                any = true;
+            }
+        if (!any) return;
+        int b0[3], b1[3];
+        brickRange(lb, b0, b1);
+        int lo[3], hi[3];
+        for (int c = b0[2]; c <= b1[2]; ++c)
+            for (int b = b0[1]; b <= b1[1]; ++b)
+                for (int a = b0[0]; a <= b1[0]; ++a) {
+                    const int brick[3] = {a, b, c};
+                    for (int ax = 0; ax < 3; ++ax) { // the brick's voxels in the leaf, leaf-local
+                        lo[ax] = std::max(lb.min()[ax], mBox.min()[ax] + kBrick * brick[ax]) - o[ax];
+                        hi[ax] = std::min(lb.max()[ax], mBox.min()[ax] + kBrick * brick[ax] + kBrick) - o[ax];
+                    }
+                    if (lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2]) continue;
+                    const std::uint8_t zmask = std::uint8_t((0xFFu >> (7 - hi[2] + lo[2])) << lo[2]);
+                    bool hit = false;
+                    for (int x = lo[0]; x <= hi[0] && !hit; ++x)
+                        for (int y = lo[1]; y <= hi[1] && !hit; ++y) hit = (column[x][y] & zmask) != 0;
+                    if (hit) set(a, b, c);
+                }
+    }
+
+    /// Mark the bricks that read some voxel of `voxels` (index space). Thread-safe.
+    void markVoxels(openvdb::CoordBBox voxels)
+    {
+        voxels.intersect(mBox);
+        if (voxels.empty()) return;
+        int b0[3], b1[3];
+        brickRange(voxels, b0, b1);
+        for (int c = b0[2]; c <= b1[2]; ++c)
+            for (int b = b0[1]; b <= b1[1]; ++b)
+                for (int a = b0[0]; a <= b1[0]; ++a) set(a, b, c);
+    }
+
+    openvdb::CoordBBox mBox; ///< the voxels there are (local 0 = its min)
+    int mCount[3] = {0, 0, 0};
+    std::vector<std::uint8_t> mActive;
+};
 
 } // namespace
 
@@ -162,35 +344,39 @@ struct HaloRaycaster::Impl
     double voxelLength = 1.0;
     openvdb::BBoxd worldBox;
     openvdb::Vec3d origin;     ///< index coordinates of local (0, 0, 0)
-    int nx = 0, ny = 0, nz = 0; ///< dense dims
+    int nx = 0, ny = 0, nz = 0; ///< dims of the box of voxels samples read
     openvdb::Vec3d extent;     ///< local sample box [0, extent]
-    std::vector<float> density, halo;
-    std::vector<openvdb::Vec3s> color, tangent;
-    /// With a tangent: density and tangent packed per voxel (ρ, tx, ty, tz), one cache line per
-    /// 4 voxels; `density` and `tangent` are then released.
-    std::vector<openvdb::Vec4f> packed;
-    int bx = 0, by = 0, bz = 0;
-    std::vector<std::uint8_t> brickActive;
+    /// The grids on the density grid's voxels: the caller's own (shared, not copied) when the
+    /// transforms are equal, as in a bake; else resampled (sparse). Null when not used.
+    openvdb::FloatGrid::ConstPtr density, halo, scalar;
+    openvdb::Vec3SGrid::ConstPtr color, tangent; ///< tangent: the tangent or flow grid (any length)
+    std::vector<openvdb::Vec3s> lut; ///< with a colormap: colour by scalar, 1024 entries
+    /// Where samples read the grids: their leaves over the blocks of the box.
+    detail::LeafLayout layout;
+    int layoutOffset[3] = {0, 0, 0}; ///< local (0, 0, 0) relative to layout.min()
+    detail::LeafTable<float> densityLeaves, haloLeaves, scalarLeaves;
+    detail::LeafTable<openvdb::Vec3s> colorLeaves, tangentLeaves;
+    BrickTable bricks;
     bool useHalo = false;
     bool haveTangent = false; ///< a tangent or flow grid was given
+    bool colored = false;     ///< colour from `color` or the colormap over `scalar`
+    bool lit = false;         ///< lighting enabled and a tangent
 
     // Construction, in this order.
     openvdb::CoordBBox setGeometry(const RenderVolume& vol, const openvdb::CoordBBox& active);
     void load(const RenderVolume& vol, const openvdb::CoordBBox& dbox, const openvdb::Coord& activeDim,
               Progress& progress);
-    double autoDensityScale(const openvdb::Coord& activeDim) const;
-    void loadColor(const RenderVolume& vol, const openvdb::CoordBBox& dbox);
-    void loadTangent(const RenderVolume& vol, const openvdb::CoordBBox& dbox);
-    void buildBrickTable();
-    void packDensityAndTangent();
+    double autoDensityScale(const openvdb::CoordBBox& dbox, const openvdb::Coord& activeDim) const;
+    void buildBrickTable(const openvdb::CoordBBox& dbox);
+    void buildLeafTables(const openvdb::CoordBBox& dbox);
 
     // Rendering.
     void renderTile(const Camera& cam, Image& img, int x0, int y0, int x1, int y1, RenderStats& st) const;
-    void renderPixel(const openvdb::math::Ray<double>& ray, float* px, RenderStats& st, const openvdb::Vec3d& light,
-                     bool headlight) const;
+    void renderPixel(const openvdb::math::Ray<double>& ray, float* px, RenderStats& st,
+                     const openvdb::Vec3d& light, bool headlight) const;
     template<bool Lit, bool Halo, bool Colored>
-    void march(const openvdb::math::Ray<double>& ray, float* px, RenderStats& st, const openvdb::Vec3d& light,
-               bool headlight) const;
+    void march(const openvdb::math::Ray<double>& ray, float* px, RenderStats& st,
+               const openvdb::Vec3d& light, bool headlight) const;
     template<bool Lit, bool Halo, bool Colored>
     class Marcher;
     /// The samples of a ray at parameters t0 + (k + ½)·dt, k in [0, kEnd).
@@ -213,15 +399,13 @@ HaloRaycaster::HaloRaycaster(const RenderVolume& vol, const RenderSettings& sett
     {
         const ThreadLimit threadLimit(settings.threads);
         m.load(vol, dbox, active.dim(), progress);
-        m.buildBrickTable();
-        m.haveTangent = !m.tangent.empty();
-        if (!m.settings.lighting.enabled) std::vector<openvdb::Vec3s>().swap(m.tangent); // unlit: not needed
-        if (!m.tangent.empty()) m.packDensityAndTangent();
+        m.buildBrickTable(dbox);
+        m.buildLeafTables(dbox);
     }
 }
 
-/// The transforms, the world box of `active` and the dense arrays' box and dims; returns that box.
-/// @throw InputError if it exceeds 2^31 voxels.
+/// The transforms, the world box of `active` and the box of voxels that samples read; returns
+/// that box. @throw InputError if it exceeds 2^31 voxels.
 openvdb::CoordBBox HaloRaycaster::Impl::setGeometry(const RenderVolume& vol, const openvdb::CoordBBox& active)
 {
     worldToIndex = xform->baseMap()->getAffineMap()->getMat4().inverse();
@@ -230,8 +414,8 @@ openvdb::CoordBBox HaloRaycaster::Impl::setGeometry(const RenderVolume& vol, con
     const openvdb::BBoxd ib(active.min().asVec3d() - openvdb::Vec3d(0.5), active.max().asVec3d() + openvdb::Vec3d(0.5));
     worldBox = xform->indexToWorld(ib);
 
-    // Dense arrays over [min − 1, max + 2]: samples lie in [min − 1, max + 1] (where trilinear
-    // support ends), and the +1 neighbour of the last one must exist.
+    // Voxels [min − 1, max + 2]: samples lie in [min − 1, max + 1] (where trilinear support
+    // ends), and the +1 neighbour of the last one must exist.
     const openvdb::CoordBBox dbox(active.min() - openvdb::Coord(1), active.max() + openvdb::Coord(2));
     const openvdb::Coord dim = dbox.dim();
     const double count = double(dim[0]) * double(dim[1]) * double(dim[2]);
@@ -247,145 +431,87 @@ openvdb::CoordBBox HaloRaycaster::Impl::setGeometry(const RenderVolume& vol, con
     return dbox;
 }
 
-/// Fill the dense arrays over `dbox` (one progress unit per grid) and resolve an automatic
-/// density scale.
+/// Take the grids on the density grid's voxels (resampling those with another transform; one
+/// progress unit per grid) and resolve an automatic density scale.
 void HaloRaycaster::Impl::load(const RenderVolume& vol, const openvdb::CoordBBox& dbox, const openvdb::Coord& activeDim,
                                Progress& progress)
 {
-    const std::size_t n = std::size_t(nx) * std::size_t(ny) * std::size_t(nz);
     int stages = 1 + (vol.halo && settings.halos) + (vol.color || settings.colormap) + (vol.tangent || vol.flow);
     progress.begin("load", std::uint64_t(stages));
-    density.assign(n, 0.0f);
-    fillDense(*vol.density, *xform, dbox, density.data());
+    density = vol.density;
     if (settings.densityScale == 0.0)
-        settings.densityScale = vol.halo ? kAutoLineScale : autoDensityScale(activeDim); // a line bake: each line nearly opaque
+        settings.densityScale = vol.halo ? kAutoLineScale : autoDensityScale(dbox, activeDim); // a line bake: each line nearly opaque
     progress.advance(1);
     detail::checkCancel(progress);
     if (vol.halo && settings.halos) {
-        halo.assign(n, 0.0f);
-        fillDense(*vol.halo, *xform, dbox, halo.data());
+        halo = onVoxelsOf<openvdb::FloatGrid>(vol.halo, *xform, dbox);
         useHalo = true;
         progress.advance(1);
     }
     detail::checkCancel(progress);
     if (settings.colormap || vol.color) {
-        loadColor(vol, dbox);
+        if (settings.colormap) {
+            scalar = onVoxelsOf<openvdb::FloatGrid>(vol.scalar, *xform, dbox);
+            lut = colormapTable(*settings.colormap);
+        } else {
+            color = onVoxelsOf<openvdb::Vec3SGrid>(vol.color, *xform, dbox);
+        }
+        colored = true;
         progress.advance(1);
     }
     detail::checkCancel(progress);
-    if (vol.tangent || vol.flow) {
-        loadTangent(vol, dbox);
+    haveTangent = vol.tangent || vol.flow;
+    lit = haveTangent && settings.lighting.enabled;
+    if (lit) { // unlit: not needed
+        tangent = onVoxelsOf<openvdb::Vec3SGrid>(vol.tangent ? vol.tangent : vol.flow, *xform, dbox);
         progress.advance(1);
     }
     progress.end();
 }
 
 /// The mean windowed density over the box times the mean box depth (voxels) gives the optical
-/// depth of an average ray; the scale makes it kAutoDepth. Summed per z slice, then slices in
-/// order: the same value for any thread count.
-double HaloRaycaster::Impl::autoDensityScale(const openvdb::Coord& activeDim) const
+/// depth of an average ray; the scale makes it kAutoDepth. The same value for any thread count.
+double HaloRaycaster::Impl::autoDensityScale(const openvdb::CoordBBox& dbox, const openvdb::Coord& activeDim) const
 {
-    std::vector<double> slice(std::size_t(nz), 0.0);
     const double lo = settings.densityLow, inv = 1.0 / (settings.densityHigh - settings.densityLow);
-    const std::size_t per = std::size_t(nx) * std::size_t(ny);
-    tbb::parallel_for(tbb::blocked_range<int>(0, nz), [&](const tbb::blocked_range<int>& r) {
-        for (int k = r.begin(); k != r.end(); ++k) {
-            double acc = 0.0;
-            for (std::size_t i = std::size_t(k) * per, e = i + per; i < e; ++i)
-                acc += std::clamp((double(density[i]) - lo) * inv, 0.0, 1.0);
-            slice[std::size_t(k)] = acc;
-        }
-    });
-    double sum = 0.0;
-    for (double v : slice) sum += v;
-    const double mean = sum / double(density.size());
+    const double mean = windowedSum(density->tree(), dbox, lo, inv) / double(dbox.volume());
     const double depth = (activeDim[0] + activeDim[1] + activeDim[2]) / 3.0;
     const double k = mean > 0.0 ? kAutoDepth / (mean * depth) : 1.0;
     return std::clamp(k, 1e-3, 8.0);
 }
 
-/// `color`: the colormap over the scalar grid (a 1024-entry table), else the colour grid.
-void HaloRaycaster::Impl::loadColor(const RenderVolume& vol, const openvdb::CoordBBox& dbox)
+/// Brick occupancy: a brick can contribute if some voxel it reads is above the density window
+/// or, with halos, above the halo threshold (a halo exit must still be seen).
+void HaloRaycaster::Impl::buildBrickTable(const openvdb::CoordBBox& dbox)
 {
-    const std::size_t n = density.size();
-    if (!settings.colormap) {
-        color.assign(n, openvdb::Vec3s(0.0f));
-        fillDense(*vol.color, *xform, dbox, color.data());
-        return;
-    }
-    std::vector<float> s(n, 0.0f);
-    fillDense(*vol.scalar, *xform, dbox, s.data());
-    const std::vector<openvdb::Vec3s> lut = colormapTable(*settings.colormap);
-    color.resize(n);
-    forEachVoxel(n, [&](std::size_t i) {
-        const float v = std::clamp(s[i], 0.0f, 1.0f);
-        color[i] = lut[std::size_t(std::lround(v * 1023.0f))];
-    });
+    bricks = BrickTable(dbox, extent);
+    bricks.mark(density->tree(), float(settings.densityLow));
+    if (useHalo) bricks.mark(halo->tree(), float(settings.haloThreshold));
 }
 
-/// `tangent`: the unit tangent grid's or flow field's direction (0 where it has none).
-void HaloRaycaster::Impl::loadTangent(const RenderVolume& vol, const openvdb::CoordBBox& dbox)
+/// The tables of the grids' leaves that samples read.
+void HaloRaycaster::Impl::buildLeafTables(const openvdb::CoordBBox& dbox)
 {
-    tangent.assign(density.size(), openvdb::Vec3s(0.0f));
-    fillDense(vol.tangent ? *vol.tangent : *vol.flow, *xform, dbox, tangent.data());
-    forEachVoxel(tangent.size(), [&](std::size_t i) {
-        const float len = tangent[i].length();
-        tangent[i] = len > 1e-20f ? tangent[i] / len : openvdb::Vec3s(0.0f);
-    });
-}
-
-/// Brick occupancy: brick b covers local samples [8b, 8b + 8) and reads voxels [8b, 8b + 8]. It
-/// can contribute if some voxel there is above the density window or, with halos, above the halo
-/// threshold (a halo exit must still be seen).
-void HaloRaycaster::Impl::buildBrickTable()
-{
-    bx = int(std::floor(extent[0] / kBrick)) + 1;
-    by = int(std::floor(extent[1] / kBrick)) + 1;
-    bz = int(std::floor(extent[2] / kBrick)) + 1;
-    brickActive.assign(std::size_t(bx) * std::size_t(by) * std::size_t(bz), 0);
-    const float lo = float(settings.densityLow), thr = float(settings.haloThreshold);
-    auto contributes = [&](int a, int b, int c) {
-        for (int k = c * kBrick; k <= std::min(c * kBrick + kBrick, nz - 1); ++k)
-            for (int j = b * kBrick; j <= std::min(b * kBrick + kBrick, ny - 1); ++j) {
-                const std::size_t row = std::size_t(nx) * (std::size_t(j) + std::size_t(ny) * std::size_t(k));
-                for (int i = a * kBrick; i <= std::min(a * kBrick + kBrick, nx - 1); ++i)
-                    if (density[row + std::size_t(i)] > lo || (useHalo && halo[row + std::size_t(i)] > thr)) return true;
-            }
-        return false;
-    };
-    tbb::parallel_for(tbb::blocked_range<int>(0, bz), [&](const tbb::blocked_range<int>& r) {
-        for (int c = r.begin(); c != r.end(); ++c)
-            for (int b = 0; b < by; ++b)
-                for (int a = 0; a < bx; ++a)
-                    brickActive[std::size_t(a) + std::size_t(bx) * (std::size_t(b) + std::size_t(by) * std::size_t(c))] =
-                        contributes(a, b, c);
-    });
-}
-
-/// Density and tangent into `packed`; both are released.
-void HaloRaycaster::Impl::packDensityAndTangent()
-{
-    packed.resize(density.size());
-    forEachVoxel(packed.size(), [&](std::size_t i) {
-        packed[i] = openvdb::Vec4f(density[i], tangent[i][0], tangent[i][1], tangent[i][2]);
-    });
-    std::vector<float>().swap(density);
-    std::vector<openvdb::Vec3s>().swap(tangent);
+    layout = detail::LeafLayout(dbox);
+    for (int a = 0; a < 3; ++a) layoutOffset[a] = dbox.min()[a] - layout.min()[a];
+    densityLeaves = detail::LeafTable<float>(density->tree(), layout);
+    if (halo) haloLeaves = detail::LeafTable<float>(halo->tree(), layout);
+    if (scalar) scalarLeaves = detail::LeafTable<float>(scalar->tree(), layout);
+    if (color) colorLeaves = detail::LeafTable<openvdb::Vec3s>(color->tree(), layout);
+    if (tangent) tangentLeaves = detail::LeafTable<openvdb::Vec3s>(tangent->tree(), layout);
 }
 
 HaloRaycaster::~HaloRaycaster() = default;
 
 const openvdb::BBoxd& HaloRaycaster::worldBBox() const { return mImpl->worldBox; }
 bool HaloRaycaster::hasHalo() const { return mImpl->useHalo; }
-bool HaloRaycaster::hasColor() const { return !mImpl->color.empty(); }
+bool HaloRaycaster::hasColor() const { return mImpl->colored; }
 bool HaloRaycaster::hasTangent() const { return mImpl->haveTangent; }
 const RenderSettings& HaloRaycaster::settings() const { return mImpl->settings; }
 
 void HaloRaycaster::Impl::renderPixel(const openvdb::math::Ray<double>& ray, float* px, RenderStats& st,
                                       const openvdb::Vec3d& lightDir, bool headlight) const
 {
-    const bool lit = settings.lighting.enabled && !packed.empty();
-    const bool colored = !color.empty();
     // Dispatch once per ray to a marcher without per-sample branches on the configuration.
     const int key = (lit ? 4 : 0) | (useHalo ? 2 : 0) | (colored ? 1 : 0);
     switch (key) {
@@ -502,9 +628,7 @@ public:
           mView(-rayDir), mLight(headlight ? mView : openvdb::Vec3f(lightDir)),
           mAmbient(float(mSettings.lighting.ambient)), mDiffuse(float(mSettings.lighting.diffuse)),
           mSpecular(float(mSettings.lighting.specular)), mShininess(float(mSettings.lighting.shininess)),
-          mShininessInt((mShininess == std::floor(mShininess) && mShininess <= 256.0f) ? int(mShininess) : -1),
-          mDensity(Lit ? nullptr : impl.density.data()), mPacked(Lit ? impl.packed.data() : nullptr),
-          mSy(std::size_t(impl.nx)), mSz(std::size_t(impl.nx) * std::size_t(impl.ny))
+          mShininessInt((mShininess == std::floor(mShininess) && mShininess <= 256.0f) ? int(mShininess) : -1)
     {
     }
 
@@ -512,21 +636,16 @@ public:
     [[gnu::always_inline]] bool sample(double t)
     {
         ++mStats.samples;
-        const Corners c = corners(mQ0 + mQd * t);
-        if constexpr (Halo) trackHalo(c);
+        float w[8];
+        moveTo(mQ0 + mQd * t, w);
+        if constexpr (Halo) trackHalo(w);
         float rho = 0.0f;
-        openvdb::Vec4f dtan(0.0f);
-        if constexpr (Lit) {
-            for (int k = 0; k < 8; ++k) dtan += mPacked[c.idx[k]] * c.w[k];
-            rho = dtan[0];
-        } else {
-            for (int k = 0; k < 8; ++k) rho += c.w[k] * mDensity[c.idx[k]];
-        }
+        for (int k = 0; k < 8; ++k) rho += w[k] * mD[k];
         if (!(rho > mLo)) return true;
         const float rw = std::min(1.0f, (rho - mLo) * mInvWindow);
         const double alpha = 1.0 - double(std::exp(-float(mTau) * rw));
         const double weight = mT * alpha * mSettings.brightness;
-        if (weight > 1e-9) emit(weight, rho, c, dtan);
+        if (weight > 1e-9) emit(weight, rho, w);
         mT *= 1.0 - alpha;
         return !(mT < mSettings.minTransmittance);
     }
@@ -547,14 +666,10 @@ public:
     }
 
 private:
-    /// The 8 voxels around a local point and their trilinear weights.
-    struct Corners
-    {
-        float w[8];
-        std::size_t idx[8];
-    };
-
-    [[gnu::always_inline]] Corners corners(const openvdb::Vec3d& q) const
+    /// The trilinear weights `w` of local point `q` over the 8 voxels around it, in
+    /// LeafLayout::Cell's order. When q is in another cell than the last sample's (half of the
+    /// time at half-voxel steps), find that cell's voxels and read their density and halo.
+    [[gnu::always_inline]] void moveTo(const openvdb::Vec3d& q, float* w)
     {
         const double fx0 = std::floor(q[0]), fy0 = std::floor(q[1]), fz0 = std::floor(q[2]);
         int ix = int(fx0), iy = int(fy0), iz = int(fz0);
@@ -564,18 +679,24 @@ private:
         const float fx = float(std::clamp(q[0] - ix, 0.0, 1.0));
         const float fy = float(std::clamp(q[1] - iy, 0.0, 1.0));
         const float fz = float(std::clamp(q[2] - iz, 0.0, 1.0));
-        const std::size_t i000 = std::size_t(ix) + mSy * std::size_t(iy) + mSz * std::size_t(iz);
-        return {{(1 - fx) * (1 - fy) * (1 - fz), fx * (1 - fy) * (1 - fz), (1 - fx) * fy * (1 - fz), fx * fy * (1 - fz),
-                 (1 - fx) * (1 - fy) * fz, fx * (1 - fy) * fz, (1 - fx) * fy * fz, fx * fy * fz},
-                {i000, i000 + 1, i000 + mSy, i000 + mSy + 1, i000 + mSz, i000 + mSz + 1, i000 + mSz + mSy,
-                 i000 + mSz + mSy + 1}};
+        const float ws[8] = {(1 - fx) * (1 - fy) * (1 - fz), fx * (1 - fy) * (1 - fz), (1 - fx) * fy * (1 - fz),
+                             fx * fy * (1 - fz),       (1 - fx) * (1 - fy) * fz, fx * (1 - fy) * fz,
+                             (1 - fx) * fy * fz,       fx * fy * fz};
+        for (int k = 0; k < 8; ++k) w[k] = ws[k];
+        if (ix == mCell[0] && iy == mCell[1] && iz == mCell[2]) return;
+        mCell[0] = ix;
+        mCell[1] = iy;
+        mCell[2] = iz;
+        mAt = mImpl.layout.cell(ix + mImpl.layoutOffset[0], iy + mImpl.layoutOffset[1], iz + mImpl.layoutOffset[2]);
+        mImpl.densityLeaves.read(mAt, mD);
+        if constexpr (Halo) mImpl.haloLeaves.read(mAt, mH);
     }
 
     /// Enter, stay in or leave a halo by the halo value at the sample.
-    [[gnu::always_inline]] void trackHalo(const Corners& c)
+    [[gnu::always_inline]] void trackHalo(const float* w)
     {
         float h = 0.0f;
-        for (int k = 0; k < 8; ++k) h += c.w[k] * mImpl.halo[c.idx[k]];
+        for (int k = 0; k < 8; ++k) h += w[k] * mH[k];
         if (h > mThreshold) {
             if (!mInHalo) {
                 mInHalo = true;
@@ -596,25 +717,53 @@ private:
         mT = 1.0 - A;
     }
 
-    /// Add the light of a sample of (positive) `weight`: colour, lit when Lit.
-    [[gnu::always_inline]] void emit(double weight, float rho, const Corners& corner, const openvdb::Vec4f& dtan)
+    /// Add the light of a sample of (positive) `weight`, density `rho` and trilinear weights `w`:
+    /// colour, lit when Lit.
+    [[gnu::always_inline]] void emit(double weight, float rho, const float* w)
     {
         openvdb::Vec3f c(1.0f);
         if constexpr (Colored) {
             // Density-weighted: colour belongs to the lines, so voxels without density
             // (outside the colour grid's active region: black) do not darken line edges.
+            openvdb::Vec3s col[8];
+            colors(col);
             openvdb::Vec3f cs(0.0f);
-            for (int k = 0; k < 8; ++k) {
-                const float dk = Lit ? mPacked[corner.idx[k]][0] : mDensity[corner.idx[k]];
-                cs += mImpl.color[corner.idx[k]] * (corner.w[k] * dk);
-            }
+            for (int k = 0; k < 8; ++k) cs += col[k] * (w[k] * mD[k]);
             c = cs / rho;
         }
         float spec = 0.0f;
-        if constexpr (Lit) c *= lineLight(openvdb::Vec3f(dtan[1], dtan[2], dtan[3]), spec);
+        if constexpr (Lit) c *= lineLight(tangent(w), spec);
         mR += weight * (c[0] + spec);
         mG += weight * (c[1] + spec);
         mB += weight * (c[2] + spec);
+    }
+
+    /// The corners' colours: the colormap's over `scalar`, else `color`.
+    [[gnu::always_inline]] void colors(openvdb::Vec3s* col) const
+    {
+        if (!mImpl.lut.empty()) {
+            float s[8];
+            mImpl.scalarLeaves.read(mAt, s);
+            for (int k = 0; k < 8; ++k)
+                col[k] = mImpl.lut[std::size_t(std::lround(std::clamp(s[k], 0.0f, 1.0f) * 1023.0f))];
+        } else {
+            mImpl.colorLeaves.read(mAt, col);
+        }
+    }
+
+    /// The trilinear tangent (not renormalised) of the corners' unit tangents (0 where the
+    /// tangent grid's vector is 0).
+    [[gnu::always_inline]] openvdb::Vec3f tangent(const float* w) const
+    {
+        openvdb::Vec3s t[8];
+        mImpl.tangentLeaves.read(mAt, t);
+        openvdb::Vec3f ts(0.0f);
+        for (int k = 0; k < 8; ++k) {
+            const float len = t[k].length();
+            const openvdb::Vec3s unit = len > 1e-20f ? t[k] / len : openvdb::Vec3s(0.0f);
+            ts += unit * w[k];
+        }
+        return ts;
     }
 
     /// Zöckler et al.: the diffuse factor √(1−(L·T)²) (with ambient) of a line of tangent `ts`
@@ -642,12 +791,14 @@ private:
     const openvdb::Vec3f mView, mLight; ///< unit directions towards the eye and the light
     const float mAmbient, mDiffuse, mSpecular, mShininess;
     const int mShininessInt;
-    const float* const mDensity;
-    const openvdb::Vec4f* const mPacked;
-    const std::size_t mSy, mSz; ///< voxel strides of y and z
     double mT = 1.0, mR = 0.0, mG = 0.0, mB = 0.0; ///< transmittance and gathered light
     bool mInHalo = false;
     float mHaloMax = 0.0f;
+    /// The cell of the last sample: its lowest voxel (local), where its voxels are, their
+    /// density and halo.
+    int mCell[3] = {std::numeric_limits<int>::min(), 0, 0};
+    detail::LeafLayout::Cell mAt{};
+    float mD[8] = {}, mH[8] = {};
 };
 
 template<bool Lit, bool Halo, bool Colored>
@@ -688,13 +839,13 @@ template<class M>
 void HaloRaycaster::Impl::marchBricks(M& marcher, const Samples& samples, const openvdb::Vec3d& q0,
                                       const openvdb::Vec3d& qd, RenderStats& st) const
 {
-    BrickWalk walk(q0, qd, samples.t0, bx, by, bz);
+    BrickWalk walk(q0, qd, samples.t0, bricks.count(0), bricks.count(1), bricks.count(2));
     std::int64_t k = 0;
     double entry = samples.t0;
     bool prevActive = true;
     while (true) {
         const double tExit = walk.exit(samples.t1);
-        const bool on = brickActive[walk.brick()];
+        const bool on = bricks.active(walk.brick());
         if (on) {
             if (!prevActive) k = std::max(k, samples.firstFrom(entry));
             for (; k < samples.kEnd && samples.t(k) < tExit; ++k)

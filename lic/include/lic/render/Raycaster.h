@@ -21,7 +21,9 @@ namespace lic {
 // ---- the volume and the transfer function ---------------------------------------------------
 
 /// The grids a render reads (world-space grids; all optional but `density`). Grids may have
-/// different transforms: the others are resampled onto `density`'s voxels (trilinear).
+/// different transforms: the others are resampled onto `density`'s voxels (trilinear, into a new
+/// sparse grid). The raycaster keeps (shares) the grids it reads where they are, without copying
+/// them: they must not be modified while it lives.
 struct RenderVolume
 {
     openvdb::FloatGrid::ConstPtr density; ///< lines, [0, 1]; required
@@ -99,9 +101,9 @@ struct RenderStats
     std::uint64_t skippedBricks = 0;  ///< brick crossings skipped as empty
 };
 
-/// @brief The raycaster: copies the volume once into dense, padded arrays over the active
-///        bounding box (plus an 8³-brick occupancy table for empty-space skipping), then renders
-///        any number of views of it.
+/// @brief The raycaster: reads the grids where they are (sparse: a table of pointers to their
+///        leaves per 8³ block of the active bounding box, plus an 8³-brick occupancy table for
+///        empty-space skipping), then renders any number of views of them.
 ///
 /// Rendering is parallel over 32 × 32-pixel tiles (TBB) and deterministic: every pixel is
 /// computed independently, so images are bit-identical for any thread count.
