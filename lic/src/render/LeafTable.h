@@ -33,6 +33,7 @@ public:
 
     /// Index coordinates of the first block's first voxel.
     const openvdb::Coord& min() const { return mMin; }
+    openvdb::Coord counts() const { return openvdb::Coord(mCount[0], mCount[1], mCount[2]); }
     std::size_t blockCount() const { return std::size_t(mCount[0]) * std::size_t(mCount[1]) * std::size_t(mCount[2]); }
     openvdb::Coord blockOrigin(std::size_t b) const
     {
@@ -44,30 +45,29 @@ public:
     /// (1,0,1), (0,1,1), (1,1,1) (x fastest).
     struct Cell
     {
-        bool oneBlock; ///< all in block[0], at offset[0] + (0, 64, 8, 72, 1, 65, 9, 73); the rest unset
         std::uint32_t block[8];
         std::uint32_t offset[8];
     };
 
-    /// @param u  the cell's lowest voxel relative to min(), ≥ 0; u + 1 must be in the box
+    /// @param u  the cell's lowest voxel relative to min(), ≥ 0; u + 1 must be in the box.
+    /// Branch-free: a third of the cells straddle two or more blocks, in no pattern a branch
+    /// predictor can follow.
     [[gnu::always_inline]] Cell cell(int ux, int uy, int uz) const
     {
-        constexpr int m = kDim - 1;
-        Cell c;
-        c.oneBlock = (ux & m) != m && (uy & m) != m && (uz & m) != m;
-        if (c.oneBlock) { // two thirds of the cells
-            c.block[0] = std::uint32_t(ux >> kLog2) +
-                         std::uint32_t(mCount[0]) * (std::uint32_t(uy >> kLog2) + std::uint32_t(mCount[1]) * std::uint32_t(uz >> kLog2));
-            c.offset[0] = std::uint32_t(((ux & m) << (2 * kLog2)) | ((uy & m) << kLog2) | (uz & m));
-            return c;
-        }
-        const std::uint32_t bx[2] = {std::uint32_t(ux >> kLog2), std::uint32_t((ux + 1) >> kLog2)};
+        constexpr std::uint32_t m = kDim - 1;
+        const std::uint32_t x[2] = {std::uint32_t(ux), std::uint32_t(ux) + 1}, y[2] = {std::uint32_t(uy), std::uint32_t(uy) + 1},
+                            z[2] = {std::uint32_t(uz), std::uint32_t(uz) + 1};
         const std::uint32_t sy = std::uint32_t(mCount[0]), sz = sy * std::uint32_t(mCount[1]);
-        const std::uint32_t by[2] = {std::uint32_t(uy >> kLog2) * sy, std::uint32_t((uy + 1) >> kLog2) * sy};
-        const std::uint32_t bz[2] = {std::uint32_t(uz >> kLog2) * sz, std::uint32_t((uz + 1) >> kLog2) * sz};
-        const std::uint32_t ox[2] = {std::uint32_t((ux & m) << (2 * kLog2)), std::uint32_t(((ux + 1) & m) << (2 * kLog2))};
-        const std::uint32_t oy[2] = {std::uint32_t((uy & m) << kLog2), std::uint32_t(((uy + 1) & m) << kLog2)};
-        const std::uint32_t oz[2] = {std::uint32_t(uz & m), std::uint32_t((uz + 1) & m)};
+        std::uint32_t bx[2], by[2], bz[2], ox[2], oy[2], oz[2];
+        for (int i = 0; i < 2; ++i) {
+            bx[i] = x[i] >> kLog2;
+            by[i] = (y[i] >> kLog2) * sy;
+            bz[i] = (z[i] >> kLog2) * sz;
+            ox[i] = (x[i] & m) << (2 * kLog2);
+            oy[i] = (y[i] & m) << kLog2;
+            oz[i] = z[i] & m;
+        }
+        Cell c;
         for (int k = 0; k < 8; ++k) {
             const int i = k & 1, j = (k >> 1) & 1, l = (k >> 2) & 1;
             c.block[k] = bx[i] + by[j] + bz[l];
@@ -110,21 +110,19 @@ public:
     /// The values at a cell's eight voxels, in LeafLayout::Cell's order.
     [[gnu::always_inline]] void read(const LeafLayout::Cell& c, ValueT* v) const
     {
-        if (c.oneBlock) {
-            constexpr int sx = 1 << (2 * LeafLayout::kLog2), sy = 1 << LeafLayout::kLog2;
-            const ValueT* p = mData[c.block[0]] + c.offset[0];
-            v[0] = p[0];
-            v[1] = p[sx];
-            v[2] = p[sy];
-            v[3] = p[sx + sy];
-            v[4] = p[1];
-            v[5] = p[sx + 1];
-            v[6] = p[sy + 1];
-            v[7] = p[sx + sy + 1];
-            return;
-        }
         for (int k = 0; k < 8; ++k) v[k] = mData[c.block[k]][c.offset[k]];
     }
+
+    /// Whether block b has no leaf (all its voxels one tile's or the background's value).
+    bool isConstant(std::size_t b) const
+    {
+        for (const auto& block : mConstant)
+            if (mData[b] == block.get()) return true;
+        return false;
+    }
+
+    /// The blocks' values, for a reader that keeps the pointer in a register.
+    const ValueT* const* blocks() const { return mData.data(); }
 
 private:
     const ValueT* constant(const ValueT& value)
@@ -139,6 +137,93 @@ private:
 
     std::vector<const ValueT*> mData;
     std::vector<std::unique_ptr<ValueT[]>> mConstant;
+};
+
+
+/// @brief A float grid's values over a LeafLayout as padded 9³ blocks: each block's 8³ voxels
+///        and the +1 face, edge and corner voxels of its neighbours, so the eight voxels of any
+///        cell lie in one block at fixed strides (81, 9, 1). The raycaster's per-sample reads
+///        (density, halo) cost what a dense array's do, while memory follows the grid: blocks
+///        whose 9³ voxels are all one value (empty space, tiles) share one constant block.
+class PaddedBlocks
+{
+public:
+    static constexpr int kDim = LeafLayout::kDim + 1;
+    static constexpr std::size_t kSize = std::size_t(kDim) * kDim * kDim;
+    /// Offsets of a cell's eight voxels from its lowest, in LeafLayout::Cell's order.
+    static constexpr int kCorner[8] = {0, kDim * kDim, kDim, kDim * kDim + kDim, 1, kDim * kDim + 1, kDim + 1,
+                                       kDim * kDim + kDim + 1};
+
+    PaddedBlocks() = default;
+    PaddedBlocks(const LeafTable<float>& table, const LeafLayout& layout)
+        : mData(layout.blockCount(), nullptr), mSy(std::uint32_t(layout.counts()[0]))
+        , mSz(std::uint32_t(layout.counts()[0] * layout.counts()[1]))
+    {
+        const float* const* src = table.blocks();
+        const std::size_t n = mData.size();
+        // Which blocks need their own copy: a leaf among the block and its +1 neighbours, or
+        // constants that differ.
+        auto neighbour = [&](std::size_t b, int dx, int dy, int dz) -> std::size_t {
+            const std::size_t x = b % mSy, y = b / mSy % (mSz / mSy), z = b / mSz;
+            const std::size_t X = x + std::size_t(dx), Y = y + std::size_t(dy), Z = z + std::size_t(dz);
+            if (X >= mSy || Y >= mSz / mSy || Z >= n / mSz) return b; // beyond the box: never read
+            return X + mSy * Y + mSz * Z;
+        };
+        std::vector<std::size_t> own;
+        for (std::size_t b = 0; b < n; ++b) {
+            bool uniform = table.isConstant(b);
+            for (int k = 1; k < 8 && uniform; ++k) {
+                const std::size_t o = neighbour(b, k & 1, (k >> 1) & 1, (k >> 2) & 1);
+                uniform = table.isConstant(o) && std::memcmp(src[o], src[b], sizeof(float)) == 0;
+            }
+            if (uniform) mData[b] = constant(src[b][0]);
+            else own.push_back(b);
+        }
+        mOwn = own.size();
+        mPool.reset(new float[own.size() * kSize]);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, own.size()), [&](const auto& r) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                const std::size_t b = own[i];
+                float* dst = mPool.get() + i * kSize;
+                for (int x = 0; x < kDim; ++x)
+                    for (int y = 0; y < kDim; ++y)
+                        for (int z = 0; z < kDim; ++z) {
+                            const int ix = x >> LeafLayout::kLog2, iy = y >> LeafLayout::kLog2, iz = z >> LeafLayout::kLog2;
+                            const float* blk = src[neighbour(b, ix, iy, iz)];
+                            const int o = ((x & 7) << 6) | ((y & 7) << 3) | (z & 7);
+                            dst[(x * kDim + y) * kDim + z] = blk[o];
+                        }
+                mData[b] = dst;
+            }
+        });
+    }
+
+    /// The cell at u (relative to the layout's min): its lowest voxel; the others at kCorner.
+    [[gnu::always_inline]] const float* at(int ux, int uy, int uz) const
+    {
+        constexpr int m = LeafLayout::kDim - 1, L = LeafLayout::kLog2;
+        const std::uint32_t b = std::uint32_t(ux >> L) + mSy * std::uint32_t(uy >> L) + mSz * std::uint32_t(uz >> L);
+        return mData[b] + ((ux & m) * kDim + (uy & m)) * kDim + (uz & m);
+    }
+
+    std::size_t ownBlocks() const { return mOwn; }
+
+private:
+    const float* constant(float value)
+    {
+        for (const auto& block : mConstant)
+            if (std::memcmp(&block[0], &value, sizeof(float)) == 0) return block.get();
+        auto block = std::make_unique<float[]>(kSize);
+        std::fill_n(block.get(), kSize, value);
+        mConstant.push_back(std::move(block));
+        return mConstant.back().get();
+    }
+
+    std::vector<const float*> mData;
+    std::unique_ptr<float[]> mPool;
+    std::vector<std::unique_ptr<float[]>> mConstant;
+    std::uint32_t mSy = 0, mSz = 0;
+    std::size_t mOwn = 0;
 };
 
 } // namespace lic::detail

@@ -355,6 +355,8 @@ struct HaloRaycaster::Impl
     detail::LeafLayout layout;
     int layoutOffset[3] = {0, 0, 0}; ///< local (0, 0, 0) relative to layout.min()
     detail::LeafTable<float> densityLeaves, haloLeaves, scalarLeaves;
+    /// Density and halo, read by every sample, as padded blocks (a cell in one block).
+    detail::PaddedBlocks densityBlocks, haloBlocks;
     detail::LeafTable<openvdb::Vec3s> colorLeaves, tangentLeaves;
     BrickTable bricks;
     bool useHalo = false;
@@ -495,7 +497,11 @@ void HaloRaycaster::Impl::buildLeafTables(const openvdb::CoordBBox& dbox)
     layout = detail::LeafLayout(dbox);
     for (int a = 0; a < 3; ++a) layoutOffset[a] = dbox.min()[a] - layout.min()[a];
     densityLeaves = detail::LeafTable<float>(density->tree(), layout);
-    if (halo) haloLeaves = detail::LeafTable<float>(halo->tree(), layout);
+    densityBlocks = detail::PaddedBlocks(densityLeaves, layout);
+    if (halo) {
+        haloLeaves = detail::LeafTable<float>(halo->tree(), layout);
+        haloBlocks = detail::PaddedBlocks(haloLeaves, layout);
+    }
     if (scalar) scalarLeaves = detail::LeafTable<float>(scalar->tree(), layout);
     if (color) colorLeaves = detail::LeafTable<openvdb::Vec3s>(color->tree(), layout);
     if (tangent) tangentLeaves = detail::LeafTable<openvdb::Vec3s>(tangent->tree(), layout);
@@ -628,14 +634,17 @@ public:
           mView(-rayDir), mLight(headlight ? mView : openvdb::Vec3f(lightDir)),
           mAmbient(float(mSettings.lighting.ambient)), mDiffuse(float(mSettings.lighting.diffuse)),
           mSpecular(float(mSettings.lighting.specular)), mShininess(float(mSettings.lighting.shininess)),
-          mShininessInt((mShininess == std::floor(mShininess) && mShininess <= 256.0f) ? int(mShininess) : -1)
+          mShininessInt((mShininess == std::floor(mShininess) && mShininess <= 256.0f) ? int(mShininess) : -1),
+          mLast{impl.nx - 2, impl.ny - 2, impl.nz - 2},
+          mOffset{impl.layoutOffset[0], impl.layoutOffset[1], impl.layoutOffset[2]},
+          mDensityBlocks(impl.densityBlocks), mHaloBlocks(impl.haloBlocks)
     {
     }
 
     /// Take the sample at parameter `t`; false once the ray is opaque (finished).
     [[gnu::always_inline]] bool sample(double t)
     {
-        ++mStats.samples;
+        ++mSamples;
         float w[8];
         moveTo(mQ0 + mQd * t, w);
         if constexpr (Halo) trackHalo(w);
@@ -659,6 +668,7 @@ public:
     /// The pixel: premultiplied RGB and alpha.
     void write(float* px) const
     {
+        mStats.samples += mSamples;
         px[0] = float(mR);
         px[1] = float(mG);
         px[2] = float(mB);
@@ -673,9 +683,9 @@ private:
     {
         const double fx0 = std::floor(q[0]), fy0 = std::floor(q[1]), fz0 = std::floor(q[2]);
         int ix = int(fx0), iy = int(fy0), iz = int(fz0);
-        ix = std::clamp(ix, 0, mImpl.nx - 2);
-        iy = std::clamp(iy, 0, mImpl.ny - 2);
-        iz = std::clamp(iz, 0, mImpl.nz - 2);
+        ix = std::clamp(ix, 0, mLast[0]);
+        iy = std::clamp(iy, 0, mLast[1]);
+        iz = std::clamp(iz, 0, mLast[2]);
         const float fx = float(std::clamp(q[0] - ix, 0.0, 1.0));
         const float fy = float(std::clamp(q[1] - iy, 0.0, 1.0));
         const float fz = float(std::clamp(q[2] - iz, 0.0, 1.0));
@@ -683,13 +693,20 @@ private:
                              fx * fy * (1 - fz),       (1 - fx) * (1 - fy) * fz, fx * (1 - fy) * fz,
                              (1 - fx) * fy * fz,       fx * fy * fz};
         for (int k = 0; k < 8; ++k) w[k] = ws[k];
-        if (ix == mCell[0] && iy == mCell[1] && iz == mCell[2]) return;
-        mCell[0] = ix;
-        mCell[1] = iy;
-        mCell[2] = iz;
-        mAt = mImpl.layout.cell(ix + mImpl.layoutOffset[0], iy + mImpl.layoutOffset[1], iz + mImpl.layoutOffset[2]);
-        mImpl.densityLeaves.read(mAt, mD);
-        if constexpr (Halo) mImpl.haloLeaves.read(mAt, mH);
+        ix += mOffset[0];
+        iy += mOffset[1];
+        iz += mOffset[2];
+        const float* d = mDensityBlocks.at(ix, iy, iz);
+        for (int k = 0; k < 8; ++k) mD[k] = d[detail::PaddedBlocks::kCorner[k]];
+        if constexpr (Halo) {
+            const float* h = mHaloBlocks.at(ix, iy, iz);
+            for (int k = 0; k < 8; ++k) mH[k] = h[detail::PaddedBlocks::kCorner[k]];
+        }
+        if constexpr (Colored || Lit) { // the other grids are read only when the sample emits
+            mCell[0] = ix;
+            mCell[1] = iy;
+            mCell[2] = iz;
+        }
     }
 
     /// Enter, stay in or leave a halo by the halo value at the sample.
@@ -721,6 +738,7 @@ private:
     /// colour, lit when Lit.
     [[gnu::always_inline]] void emit(double weight, float rho, const float* w)
     {
+        if constexpr (Colored || Lit) mAt = mImpl.layout.cell(mCell[0], mCell[1], mCell[2]);
         openvdb::Vec3f c(1.0f);
         if constexpr (Colored) {
             // Density-weighted: colour belongs to the lines, so voxels without density
@@ -796,9 +814,14 @@ private:
     float mHaloMax = 0.0f;
     /// The cell of the last sample: its lowest voxel (local), where its voxels are, their
     /// density and halo.
-    int mCell[3] = {std::numeric_limits<int>::min(), 0, 0};
+    int mCell[3] = {0, 0, 0}; ///< with colour or lighting: the sample's cell in the leaf layout
     detail::LeafLayout::Cell mAt{};
     float mD[8] = {}, mH[8] = {};
+    std::uint64_t mSamples = 0;
+    const int mLast[3];   ///< the highest cell per axis (local)
+    const int mOffset[3]; ///< local (0, 0, 0) in the leaf layout
+    const detail::PaddedBlocks& mDensityBlocks;
+    const detail::PaddedBlocks& mHaloBlocks;
 };
 
 template<bool Lit, bool Halo, bool Colored>
