@@ -3,6 +3,7 @@
 // camera conventions, determinism, stereo, and EXR/PNG/GIF through OIIO and OCIO.
 #include "lic/util/Error.h"
 #include "lic/render/Raycaster.h"
+#include "render/LeafTable.h" // internal: where samples read the grids
 
 #include "TempDirSuite.h"
 
@@ -575,6 +576,83 @@ TEST(Render, GridsWithAnotherTransformAreResampledOntoTheDensityVoxels)
     double sum = 0;
     for (float v : ib.rgba) sum += v;
     ASSERT_GT(sum, 1.0) << "the test image must not be empty";
+    ASSERT_EQ(0, std::memcmp(ia.rgba.data(), ib.rgba.data(), ia.rgba.size() * sizeof(float)));
+}
+
+// Where samples read the grids (render/LeafTable.h): for every cell of a box that does not start
+// on a leaf boundary, over leaves, leaf-sized and larger tiles, and background, the leaf table
+// gives the tree's own values at the cell's eight voxels, in the cell order.
+TEST(Render, LeafTablesReadTheTreesValues)
+{
+    openvdb::initialize();
+    openvdb::FloatTree tree(0.25f);
+    tree.fill(openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(7)), 0.5f, true);       // one leaf-sized tile
+    tree.fill(openvdb::CoordBBox(openvdb::Coord(128, 0, 0), openvdb::Coord(255, 127, 127)), 0.75f, true); // an internal tile
+    std::uint32_t h = 12345;
+    auto next = [&] { h = h * 1664525u + 1013904223u; return float(h >> 8) / float(1 << 24); };
+    for (int i = 0; i < 3000; ++i) {
+        const openvdb::Coord c(int(next() * 60) - 20, int(next() * 50) - 15, int(next() * 50) - 25);
+        if (c.x() >= 0 && c.x() <= 7 && c.y() >= 0 && c.y() <= 7 && c.z() >= 0 && c.z() <= 7) continue;
+        tree.setValueOn(c, next());
+    }
+    const openvdb::CoordBBox box(openvdb::Coord(-13, -7, -21), openvdb::Coord(134, 25, 18));
+    const detail::LeafLayout layout(box);
+    const detail::LeafTable<float> table(tree, layout);
+    EXPECT_GT(table.leafBlocks(), 10u);
+    EXPECT_LT(table.leafBlocks(), layout.blockCount());
+    std::size_t cells = 0, bad = 0;
+    openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(tree);
+    for (int x = box.min().x(); x < box.max().x(); ++x)
+        for (int y = box.min().y(); y < box.max().y(); ++y)
+            for (int z = box.min().z(); z < box.max().z(); ++z) {
+                const int u[3] = {x - layout.min().x(), y - layout.min().y(), z - layout.min().z()};
+                float v[8];
+                table.read(layout.cell(u[0], u[1], u[2]), v);
+                for (int k = 0; k < 8; ++k) {
+                    const float want = acc.getValue(openvdb::Coord(x + (k & 1), y + ((k >> 1) & 1), z + ((k >> 2) & 1)));
+                    bad += std::memcmp(&v[k], &want, 4) != 0;
+                }
+                ++cells;
+            }
+    EXPECT_EQ(cells, std::size_t(147) * 32 * 39);
+    EXPECT_EQ(bad, 0u);
+}
+
+// Density and halo are copied dense when their leaves fill half the box, else read through the
+// leaf tables: a diagonal line (few leaves) and the same line with every other voxel of its box
+// set active at 0 (leaves everywhere; the same values, the same box) render the same bits, lit,
+// coloured and with halos.
+TEST(Render, DenseCopiesAndLeafTablesRenderAlike)
+{
+    const Vec3d dir = Vec3d(1, 1, 1) / std::sqrt(3.0);
+    const openvdb::Coord lo(-16), hi(16);
+    auto d = makeScalar("density", 1.0, lo, hi, [&](const Vec3d& p) { return 1.0 - lineDistance(p, Vec3d(0), dir) / 1.5; });
+    auto h = makeScalar("halo", 1.0, lo, hi, [&](const Vec3d& p) { return 1.0 - lineDistance(p, Vec3d(0), dir) / 3.0; });
+    RenderVolume thin;
+    thin.density = d;
+    thin.halo = h;
+    thin.tangent = makeConstVec("tangent", *h, Vec3d(1, 1, 1));
+    thin.color = makeConstVec("color", *h, Vec3d(0.9, 0.5, 0.2));
+    RenderVolume full = thin;
+    auto filled = d->deepCopy();
+    const openvdb::CoordBBox box = d->evalActiveVoxelBoundingBox();
+    for (auto ijk = box.begin(); ijk; ++ijk)
+        if (!filled->tree().isValueOn(*ijk)) filled->tree().setValueOn(*ijk, 0.0f);
+    full.density = filled;
+    ASSERT_EQ(filled->evalActiveVoxelBoundingBox(), box);
+    CameraSettings cs;
+    cs.azimuth = 21;
+    cs.elevation = 17;
+    cs.width = 48;
+    cs.height = 40;
+    const HaloRaycaster a(thin, RenderSettings{}), b(full, RenderSettings{});
+    EXPECT_FALSE(a.denseCopies());
+    EXPECT_TRUE(b.denseCopies());
+    const Camera cam = makeCamera(cs, a.worldBBox());
+    const Image ia = a.render(cam), ib = b.render(cam);
+    double sum = 0;
+    for (float v : ia.rgba) sum += v;
+    ASSERT_GT(sum, 10.0) << "the test image must not be empty";
     ASSERT_EQ(0, std::memcmp(ia.rgba.data(), ib.rgba.data(), ia.rgba.size() * sizeof(float)));
 }
 

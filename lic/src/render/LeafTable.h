@@ -103,8 +103,10 @@ public:
         });
         // Blocks without a leaf: one constant block per distinct value (usually the background only).
         openvdb::tree::ValueAccessor<const TreeT, false> acc(tree);
-        for (std::size_t b = 0; b < mData.size(); ++b)
+        for (std::size_t b = 0; b < mData.size(); ++b) {
             if (!mData[b]) mData[b] = constant(acc.getValue(layout.blockOrigin(b)));
+            else ++mLeaves;
+        }
     }
 
     /// The values at a cell's eight voxels, in LeafLayout::Cell's order.
@@ -112,6 +114,9 @@ public:
     {
         for (int k = 0; k < 8; ++k) v[k] = mData[c.block[k]][c.offset[k]];
     }
+
+    /// The blocks that hold a leaf.
+    std::size_t leafBlocks() const { return mLeaves; }
 
     /// Whether block b has no leaf (all its voxels one tile's or the background's value).
     bool isConstant(std::size_t b) const
@@ -137,93 +142,8 @@ private:
 
     std::vector<const ValueT*> mData;
     std::vector<std::unique_ptr<ValueT[]>> mConstant;
+    std::size_t mLeaves = 0;
 };
 
-
-/// @brief A float grid's values over a LeafLayout as padded 9³ blocks: each block's 8³ voxels
-///        and the +1 face, edge and corner voxels of its neighbours, so the eight voxels of any
-///        cell lie in one block at fixed strides (81, 9, 1). The raycaster's per-sample reads
-///        (density, halo) cost what a dense array's do, while memory follows the grid: blocks
-///        whose 9³ voxels are all one value (empty space, tiles) share one constant block.
-class PaddedBlocks
-{
-public:
-    static constexpr int kDim = LeafLayout::kDim + 1;
-    static constexpr std::size_t kSize = std::size_t(kDim) * kDim * kDim;
-    /// Offsets of a cell's eight voxels from its lowest, in LeafLayout::Cell's order.
-    static constexpr int kCorner[8] = {0, kDim * kDim, kDim, kDim * kDim + kDim, 1, kDim * kDim + 1, kDim + 1,
-                                       kDim * kDim + kDim + 1};
-
-    PaddedBlocks() = default;
-    PaddedBlocks(const LeafTable<float>& table, const LeafLayout& layout)
-        : mData(layout.blockCount(), nullptr), mSy(std::uint32_t(layout.counts()[0]))
-        , mSz(std::uint32_t(layout.counts()[0] * layout.counts()[1]))
-    {
-        const float* const* src = table.blocks();
-        const std::size_t n = mData.size();
-        // Which blocks need their own copy: a leaf among the block and its +1 neighbours, or
-        // constants that differ.
-        auto neighbour = [&](std::size_t b, int dx, int dy, int dz) -> std::size_t {
-            const std::size_t x = b % mSy, y = b / mSy % (mSz / mSy), z = b / mSz;
-            const std::size_t X = x + std::size_t(dx), Y = y + std::size_t(dy), Z = z + std::size_t(dz);
-            if (X >= mSy || Y >= mSz / mSy || Z >= n / mSz) return b; // beyond the box: never read
-            return X + mSy * Y + mSz * Z;
-        };
-        std::vector<std::size_t> own;
-        for (std::size_t b = 0; b < n; ++b) {
-            bool uniform = table.isConstant(b);
-            for (int k = 1; k < 8 && uniform; ++k) {
-                const std::size_t o = neighbour(b, k & 1, (k >> 1) & 1, (k >> 2) & 1);
-                uniform = table.isConstant(o) && std::memcmp(src[o], src[b], sizeof(float)) == 0;
-            }
-            if (uniform) mData[b] = constant(src[b][0]);
-            else own.push_back(b);
-        }
-        mOwn = own.size();
-        mPool.reset(new float[own.size() * kSize]);
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, own.size()), [&](const auto& r) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                const std::size_t b = own[i];
-                float* dst = mPool.get() + i * kSize;
-                for (int x = 0; x < kDim; ++x)
-                    for (int y = 0; y < kDim; ++y)
-                        for (int z = 0; z < kDim; ++z) {
-                            const int ix = x >> LeafLayout::kLog2, iy = y >> LeafLayout::kLog2, iz = z >> LeafLayout::kLog2;
-                            const float* blk = src[neighbour(b, ix, iy, iz)];
-                            const int o = ((x & 7) << 6) | ((y & 7) << 3) | (z & 7);
-                            dst[(x * kDim + y) * kDim + z] = blk[o];
-                        }
-                mData[b] = dst;
-            }
-        });
-    }
-
-    /// The cell at u (relative to the layout's min): its lowest voxel; the others at kCorner.
-    [[gnu::always_inline]] const float* at(int ux, int uy, int uz) const
-    {
-        constexpr int m = LeafLayout::kDim - 1, L = LeafLayout::kLog2;
-        const std::uint32_t b = std::uint32_t(ux >> L) + mSy * std::uint32_t(uy >> L) + mSz * std::uint32_t(uz >> L);
-        return mData[b] + ((ux & m) * kDim + (uy & m)) * kDim + (uz & m);
-    }
-
-    std::size_t ownBlocks() const { return mOwn; }
-
-private:
-    const float* constant(float value)
-    {
-        for (const auto& block : mConstant)
-            if (std::memcmp(&block[0], &value, sizeof(float)) == 0) return block.get();
-        auto block = std::make_unique<float[]>(kSize);
-        std::fill_n(block.get(), kSize, value);
-        mConstant.push_back(std::move(block));
-        return mConstant.back().get();
-    }
-
-    std::vector<const float*> mData;
-    std::unique_ptr<float[]> mPool;
-    std::vector<std::unique_ptr<float[]>> mConstant;
-    std::uint32_t mSy = 0, mSz = 0;
-    std::size_t mOwn = 0;
-};
 
 } // namespace lic::detail

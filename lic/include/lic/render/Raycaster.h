@@ -125,6 +125,9 @@ public:
     bool hasHalo() const;    ///< a halo grid was given (halos are used if settings.halos too)
     bool hasColor() const;   ///< colour from `color` or a colormap
     bool hasTangent() const; ///< illumination possible (tangent grid or flow field)
+    /// Whether density and halo were copied into dense arrays (their leaves fill at least half of
+    /// the box); else every grid is read where it is.
+    bool denseCopies() const;
     /// The settings in use (densityScale resolved when it was 0 = auto).
     const RenderSettings& settings() const;
 
