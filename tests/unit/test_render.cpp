@@ -85,6 +85,19 @@ RenderSettings exact()
     return s;
 }
 
+/// Both raycasters' images through the camera `cs` frames on `a`'s box: not empty (the sum of
+/// the RGBA values above `minSum`) and the same bits.
+void expectSameImage(const HaloRaycaster& a, const HaloRaycaster& b, const CameraSettings& cs, double minSum)
+{
+    const Camera cam = makeCamera(cs, a.worldBBox());
+    const Image ia = a.render(cam), ib = b.render(cam);
+    double sum = 0;
+    for (float v : ia.rgba) sum += v;
+    ASSERT_GT(sum, minSum) << "the test image must not be empty";
+    ASSERT_EQ(ia.rgba.size(), ib.rgba.size());
+    EXPECT_EQ(0, std::memcmp(ia.rgba.data(), ib.rgba.data(), ia.rgba.size() * sizeof(float)));
+}
+
 } // namespace
 
 // ---- closed forms ---------------------------------------------------------------------------
@@ -518,12 +531,7 @@ TEST(Render, TilesRenderAsTheirVoxels)
     b.density = voxels;
     const HaloRaycaster ra(a, RenderSettings{}), rb(b, RenderSettings{});
     EXPECT_EQ(ra.settings().densityScale, rb.settings().densityScale); // auto: the same sum over the box
-    const Camera cam = makeCamera(cs, ra.worldBBox());
-    const Image ia = ra.render(cam), ib = rb.render(cam);
-    double sum = 0;
-    for (float v : ib.rgba) sum += v;
-    ASSERT_GT(sum, 1.0) << "the test image must not be empty";
-    ASSERT_EQ(0, std::memcmp(ia.rgba.data(), ib.rgba.data(), ia.rgba.size() * sizeof(float)));
+    expectSameImage(ra, rb, cs, 1.0);
 }
 
 // A grid with another transform is sampled trilinearly at the centres of the density grid's
@@ -571,12 +579,7 @@ TEST(Render, GridsWithAnotherTransformAreResampledOntoTheDensityVoxels)
     cs.width = 36;
     cs.height = 36;
     const HaloRaycaster ra(a, exact()), rb(b, exact());
-    const Camera cam = makeCamera(cs, ra.worldBBox());
-    const Image ia = ra.render(cam), ib = rb.render(cam);
-    double sum = 0;
-    for (float v : ib.rgba) sum += v;
-    ASSERT_GT(sum, 1.0) << "the test image must not be empty";
-    ASSERT_EQ(0, std::memcmp(ia.rgba.data(), ib.rgba.data(), ia.rgba.size() * sizeof(float)));
+    expectSameImage(ra, rb, cs, 1.0);
 }
 
 // Where samples read the grids (render/LeafTable.h): for every cell of a box that does not start
@@ -648,12 +651,7 @@ TEST(Render, DenseCopiesAndLeafTablesRenderAlike)
     const HaloRaycaster a(thin, RenderSettings{}), b(full, RenderSettings{});
     EXPECT_FALSE(a.denseCopies());
     EXPECT_TRUE(b.denseCopies());
-    const Camera cam = makeCamera(cs, a.worldBBox());
-    const Image ia = a.render(cam), ib = b.render(cam);
-    double sum = 0;
-    for (float v : ia.rgba) sum += v;
-    ASSERT_GT(sum, 10.0) << "the test image must not be empty";
-    ASSERT_EQ(0, std::memcmp(ia.rgba.data(), ib.rgba.data(), ia.rgba.size() * sizeof(float)));
+    expectSameImage(a, b, cs, 10.0);
 }
 
 TEST(Render, RefusesBadInput)
