@@ -448,12 +448,12 @@ void chooseDensityRange(const RenderJob& job, RenderPlan& plan, const openvdb::F
     plan.settings.densityHigh = plan.autoRange->high;
 }
 
-/// Read, render and write (or keep for the GIF) frame `f` (1-based) of `inputs`.
-void renderFrame(const RenderJob& job, RenderPlan& plan, const std::vector<std::string>& inputs, int f,
-                 const openvdb::Vec3SGrid::Ptr& flow, lic::Progress& progress, RenderRun& run)
+/// Load `input`, frame `f` (1-based), and render it; the grids and the raycaster are freed on
+/// return, before the image is written, so the write's memory reuses theirs.
+lic::Image loadAndRender(const RenderJob& job, RenderPlan& plan, const std::string& input, int f,
+                         const openvdb::Vec3SGrid::Ptr& flow, lic::Progress& progress, RenderRun& run)
 {
     lic::RenderSettings& settings = plan.settings;
-    const std::string& input = inputs[std::size_t(f - 1)];
     auto t0 = Clock::now();
     LoadedVolume lv = loadVolume(input, /*wantHalo=*/true, settings.colormap.has_value(), settings.lighting.enabled);
     if (f == 1) {
@@ -475,8 +475,16 @@ void renderFrame(const RenderJob& job, RenderPlan& plan, const std::vector<std::
     t0 = Clock::now();
     lic::Image img = renderView(caster, job.stereo, run, progress);
     run.tRender += seconds(t0);
+    return img;
+}
 
-    t0 = Clock::now();
+/// Read, render and write (or keep for the GIF) frame `f` (1-based) of `inputs`.
+void renderFrame(const RenderJob& job, RenderPlan& plan, const std::vector<std::string>& inputs, int f,
+                 const openvdb::Vec3SGrid::Ptr& flow, lic::Progress& progress, RenderRun& run)
+{
+    const std::string& input = inputs[std::size_t(f - 1)];
+    lic::Image img = loadAndRender(job, plan, input, f, flow, progress, run);
+    auto t0 = Clock::now();
     if (plan.gifOut) {
         run.gifFrames.push_back(std::move(img));
     } else {
