@@ -764,50 +764,58 @@ private:
     /// colour, lit when Lit.
     [[gnu::always_inline]] void emit(double weight, float rho, const float* w)
     {
-        if constexpr (Colored || Lit) mAt = mImpl.layout.cell(mCell[0], mCell[1], mCell[2]);
+        if constexpr (Colored || Lit) {
+            // The corners' colours and unit tangents, read once per cell (consecutive samples
+            // often share one).
+            if (mCell[0] != mEmitCell[0] || mCell[1] != mEmitCell[1] || mCell[2] != mEmitCell[2]) {
+                for (int a = 0; a < 3; ++a) mEmitCell[a] = mCell[a];
+                const detail::LeafLayout::Cell at = mImpl.layout.cell(mCell[0], mCell[1], mCell[2]);
+                if constexpr (Colored) colors(at, mCol);
+                if constexpr (Lit) unitTangents(at, mUnit);
+            }
+        }
         openvdb::Vec3f c(1.0f);
         if constexpr (Colored) {
             // Density-weighted: colour belongs to the lines, so voxels without density
             // (outside the colour grid's active region: black) do not darken line edges.
-            openvdb::Vec3s col[8];
-            colors(col);
             openvdb::Vec3f cs(0.0f);
-            for (int k = 0; k < 8; ++k) cs += col[k] * (w[k] * mD[k]);
+            for (int k = 0; k < 8; ++k) cs += mCol[k] * (w[k] * mD[k]);
             c = cs / rho;
         }
         float spec = 0.0f;
-        if constexpr (Lit) c *= lineLight(tangent(w), spec);
+        if constexpr (Lit) {
+            // The trilinear tangent (not renormalised) of the corners' unit tangents.
+            openvdb::Vec3f ts(0.0f);
+            for (int k = 0; k < 8; ++k) ts += mUnit[k] * w[k];
+            c *= lineLight(ts, spec);
+        }
         mR += weight * (c[0] + spec);
         mG += weight * (c[1] + spec);
         mB += weight * (c[2] + spec);
     }
 
     /// The corners' colours: the colormap's over `scalar`, else `color`.
-    [[gnu::always_inline]] void colors(openvdb::Vec3s* col) const
+    [[gnu::always_inline]] void colors(const detail::LeafLayout::Cell& at, openvdb::Vec3s* col) const
     {
         if (!mImpl.lut.empty()) {
             float s[8];
-            mImpl.scalarLeaves.read(mAt, s);
+            mImpl.scalarLeaves.read(at, s);
             for (int k = 0; k < 8; ++k)
                 col[k] = mImpl.lut[std::size_t(std::lround(std::clamp(s[k], 0.0f, 1.0f) * 1023.0f))];
         } else {
-            mImpl.colorLeaves.read(mAt, col);
+            mImpl.colorLeaves.read(at, col);
         }
     }
 
-    /// The trilinear tangent (not renormalised) of the corners' unit tangents (0 where the
-    /// tangent grid's vector is 0).
-    [[gnu::always_inline]] openvdb::Vec3f tangent(const float* w) const
+    /// The corners' unit tangents (0 where the tangent grid's vector is 0).
+    [[gnu::always_inline]] void unitTangents(const detail::LeafLayout::Cell& at, openvdb::Vec3s* unit) const
     {
         openvdb::Vec3s t[8];
-        mImpl.tangentLeaves.read(mAt, t);
-        openvdb::Vec3f ts(0.0f);
+        mImpl.tangentLeaves.read(at, t);
         for (int k = 0; k < 8; ++k) {
             const float len = t[k].length();
-            const openvdb::Vec3s unit = len > 1e-20f ? t[k] / len : openvdb::Vec3s(0.0f);
-            ts += unit * w[k];
+            unit[k] = len > 1e-20f ? t[k] / len : openvdb::Vec3s(0.0f);
         }
-        return ts;
     }
 
     /// Zöckler et al.: the diffuse factor √(1−(L·T)²) (with ambient) of a line of tangent `ts`
@@ -841,7 +849,9 @@ private:
     /// The cell of the last sample: its lowest voxel (local), where its voxels are, their
     /// density and halo.
     int mCell[3] = {0, 0, 0}; ///< with colour or lighting: the sample's cell in the leaf layout
-    detail::LeafLayout::Cell mAt{};
+    /// The cell whose colours and unit tangents mCol and mUnit hold.
+    int mEmitCell[3] = {std::numeric_limits<int>::min(), 0, 0};
+    openvdb::Vec3s mCol[8], mUnit[8];
     float mD[8] = {}, mH[8] = {};
     std::uint64_t mSamples = 0;
     const int mLast[3];   ///< the highest cell per axis (local)
