@@ -1,6 +1,7 @@
 // Where the raycaster's trilinear samples read a grid's voxels: a table of pointers to the
 // grid's own leaf buffers over the box the rays cross, one per 8³ block (render/Raycaster.cpp).
-// The grids are marched where they are, not copied into dense arrays. Internal to lic/src/render.
+// The grids are marched where they are (Raycaster.cpp copies only the density and halo of a dense
+// bake into dense arrays). Internal to lic/src/render.
 #pragma once
 
 #include <openvdb/openvdb.h>
@@ -33,7 +34,6 @@ public:
 
     /// Index coordinates of the first block's first voxel.
     const openvdb::Coord& min() const { return mMin; }
-    openvdb::Coord counts() const { return openvdb::Coord(mCount[0], mCount[1], mCount[2]); }
     std::size_t blockCount() const { return std::size_t(mCount[0]) * std::size_t(mCount[1]) * std::size_t(mCount[2]); }
     openvdb::Coord blockOrigin(std::size_t b) const
     {
@@ -117,14 +117,6 @@ public:
 
     /// The blocks that hold a leaf.
     std::size_t leafBlocks() const { return mLeaves; }
-
-    /// Whether block b has no leaf (all its voxels one tile's or the background's value).
-    bool isConstant(std::size_t b) const
-    {
-        for (const auto& block : mConstant)
-            if (mData[b] == block.get()) return true;
-        return false;
-    }
 
     /// The blocks' values, for a reader that keeps the pointer in a register.
     const ValueT* const* blocks() const { return mData.data(); }

@@ -846,13 +846,12 @@ private:
     double mT = 1.0, mR = 0.0, mG = 0.0, mB = 0.0; ///< transmittance and gathered light
     bool mInHalo = false;
     float mHaloMax = 0.0f;
-    /// The cell of the last sample: its lowest voxel (local), where its voxels are, their
-    /// density and halo.
-    int mCell[3] = {0, 0, 0}; ///< with colour or lighting: the sample's cell in the leaf layout
+    /// With colour or lighting: the sample's cell (its lowest voxel) in the leaf layout.
+    int mCell[3] = {0, 0, 0};
     /// The cell whose colours and unit tangents mCol and mUnit hold.
     int mEmitCell[3] = {std::numeric_limits<int>::min(), 0, 0};
     openvdb::Vec3s mCol[8], mUnit[8];
-    float mD[8] = {}, mH[8] = {};
+    float mD[8] = {}, mH[8] = {}; ///< the sample's cell's density and halo
     std::uint64_t mSamples = 0;
     const int mLast[3];   ///< the highest cell per axis (local)
     const int mOffset[3]; ///< local (0, 0, 0) in the leaf layout
