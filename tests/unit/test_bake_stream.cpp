@@ -571,7 +571,8 @@ TEST_F(StreamBake, ALoopTooBigForMemoryIsRefusedBeforeItStarts)
 // A spot still's leaves are sealed as its bricks finish (compressed for the file, their values
 // dropped): the file must be the one whole leaves give, byte for byte but for the header's random
 // UUID, for every grid a still can have (lines, halos, the width series, colour, scalar, tangent,
-// velocity, input), in floats and in half floats. Loops and noise bakes keep whole leaves.
+// velocity, input), in floats and in half floats. Loops seal the grids their frames share; noise
+// stills keep whole leaves.
 TEST_F(StreamBake, SealedLeavesWriteTheFileWholeLeavesWrite)
 {
     auto fileBytes = [](const std::string& path) {
@@ -610,10 +611,45 @@ TEST_F(StreamBake, SealedLeavesWriteTheFileWholeLeavesWrite)
         EXPECT_EQ(a.substr(0, kUuid), b.substr(0, kUuid));
         EXPECT_TRUE(a.substr(kUuidEnd) == b.substr(kUuidEnd)) << "half " << half << ": sealed and whole leaves differ";
     }
+    // Loops seal only the grids every frame shares (colour, scalar, tangent, velocity, input):
+    // compressed once for all the frame files. Every frame must still be the file whole leaves
+    // give. Spot loops (comets, composed on arrival) and noise loops (composed per frame).
+    auto spotLoop = spotRecipe("sealed_loop.vdb");
+    auto noiseLoop = recipe("sealed_noise_loop.vdb");
+    for (auto* r : {&spotLoop, &noiseLoop}) {
+        r->animation.frames = 3;
+        r->output.grids.setKey("write_input", true);
+        r->output.grids.setKey("write_velocity", true);
+        r->output.grids.setKey("write_tangent", true);
+        if (!r->color) r->color = vdbexport::ColorSpec{"speed", "viridis", std::nullopt};
+        std::vector<std::string> frames[2], paths;
+        for (const bool seal : {true, false}) {
+            if (seal) ::unsetenv("LICVDB_SEAL_LEAVES");
+            else ::setenv("LICVDB_SEAL_LEAVES", "0", 1);
+            const auto summary = vdbexport::bake(*r);
+            EXPECT_EQ(summary["sealed_leaves"].get<bool>(), seal) << r->output.path;
+            paths = summary["files"].get<std::vector<std::string>>();
+            for (const auto& path : paths) frames[seal ? 0 : 1].push_back(fileBytes(path));
+        }
+        ASSERT_EQ(frames[0].size(), 3u) << r->output.path;
+        ASSERT_EQ(frames[1].size(), 3u) << r->output.path;
+        for (std::size_t f = 0; f < 3; ++f) {
+            const std::string &a = frames[0][f], &b = frames[1][f];
+            ASSERT_EQ(a.size(), b.size()) << r->output.path << " frame " << f + 1;
+            constexpr std::size_t kUuid = 21, kUuidEnd = 21 + 36;
+            EXPECT_EQ(a.substr(0, kUuid), b.substr(0, kUuid));
+            EXPECT_TRUE(a.substr(kUuidEnd) == b.substr(kUuidEnd))
+                << r->output.path << " frame " << f + 1 << ": sealed and whole leaves differ";
+        }
+        // Three different frames (the loop moves), the shared grids in each.
+        EXPECT_NE(frames[0][0], frames[0][1]) << r->output.path;
+        std::set<std::string> names;
+        for (const auto& g : readAll(paths.at(1))) names.insert(g->getName());
+        for (const char* want : {"density", "color", "scalar", "tangent", "velocity", "input"})
+            EXPECT_TRUE(names.count(want)) << r->output.path << ": " << want;
+    }
     ::unsetenv("LICVDB_SEAL_LEAVES");
-    auto loop = spotRecipe("sealed_loop.vdb");
-    loop.animation.frames = 2;
-    EXPECT_FALSE(vdbexport::bake(loop)["sealed_leaves"].get<bool>());
+    // A noise still composes its leaves at the end: nothing to seal.
     EXPECT_FALSE(vdbexport::bake(recipe("sealed_noise.vdb"))["sealed_leaves"].get<bool>());
 }
 

@@ -151,11 +151,19 @@ bool Compositor::writes(const OutputGridRow& row) const
 
 bool Compositor::sealLeaves(LeafSealer* sealer)
 {
-    if (!sealer || !mSettings.composesOnArrival() || mSettings.frames != 1) return false;
+    // A spot still: every grid. A loop: the grids every frame shares (colour, scalar, tangent...),
+    // final when their brick is consumed, so compressed once for all the frames instead of once
+    // per frame file. A gather engine's still composes its grids at the end: nothing.
+    if (!sealer) return false;
+    const bool still = mSettings.composesOnArrival() && mSettings.frames == 1;
+    if (!still && mSettings.frames == 1) return false;
     std::vector<std::string> names;
-    forEachStillSet([&](int, const auto& name, const auto&) { names.push_back(name()); });
+    if (still) forEachStillSet([&](int, const auto& name, const auto&) { names.push_back(name()); });
+    else forEachShared([&](const OutputGridRow& row, const auto&) { names.push_back(std::string(row.name)); });
+    if (names.empty()) return false;
     sealer->begin(names);
     mSealer = sealer;
+    mSealShared = !still;
     return true;
 }
 
@@ -170,7 +178,12 @@ void Compositor::consume(const BrickChannels& bc)
     for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i) {
         if (bc.blockTouched && !bc.blockTouched[i]) continue;
         const std::size_t b = bc.brick->blocks[i];
-        forEachStillSet([&](int g, const auto&, auto& set) { set.seal(b, *mSealer, g); });
+        if (mSealShared) {
+            int g = 0;
+            forEachShared([&](const OutputGridRow&, auto& set) { set.seal(b, *mSealer, g++); });
+        } else {
+            forEachStillSet([&](int g, const auto&, auto& set) { set.seal(b, *mSealer, g); });
+        }
     }
 }
 

@@ -108,7 +108,8 @@ void prepareFrame(const Recipe& recipe, openvdb::GridPtrVec& grids, const openvd
 /// checked, hashed) on up to one thread per core at once, added to the set in order. At most that
 /// many frames' grids are held at a time. The files are the same bytes as written one by one.
 void writeFramesConcurrently(const Recipe& r, lic::Compositor& compositor, const openvdb::MetaMap& densityMeta,
-                             lic::Progress& progress, int frames, Written& out)
+                             lic::Progress& progress, int frames, Written& out,
+                             const vdbexport::detail::SealedLeaves* sealed)
 {
     struct Job
     {
@@ -138,7 +139,7 @@ void writeFramesConcurrently(const Recipe& r, lic::Compositor& compositor, const
             & tbb::make_filter<JobPtr, JobPtr>(tbb::filter_mode::parallel,
                                                [&](JobPtr job) {
                                                    job->file.emplace(OutputSet::writeVdb(
-                                                       out.paths[std::size_t(job->frame - 1)], job->grids));
+                                                       out.paths[std::size_t(job->frame - 1)], job->grids, {}, sealed));
                                                    return job;
                                                })
             & tbb::make_filter<JobPtr, void>(tbb::filter_mode::serial_in_order, [&](JobPtr job) {
@@ -181,7 +182,7 @@ Written writeFrames(const Plan& plan, lic::Compositor& compositor, const openvdb
     progress.begin(plan.frames > 1 ? "writing frames" : "writing", std::uint64_t(plan.frames));
     out.output = std::make_shared<OutputSet>(); // staged unseen; nothing to remove on failure
     if (!gather && plan.frames > 1) {
-        writeFramesConcurrently(r, compositor, densityMeta, progress, plan.frames, out);
+        writeFramesConcurrently(r, compositor, densityMeta, progress, plan.frames, out, sealed);
     } else {
         for (int f = 1; f <= plan.frames; ++f) {
             if (progress.wasInterrupted()) throw lic::Cancelled();

@@ -99,9 +99,10 @@ public:
                const OutputDomain& domain, const BrickLayout& layout);
 
     /// Spot stills: hand every leaf to `sealer` as soon as its brick is consumed (LeafSealer.h), so
-    /// that frame(1)'s grids hold topology-only leaves. Call before the first consume(). Returns
-    /// false, and seals nothing, for other bakes (their leaves are read again when frames are
-    /// composed).
+    /// that frame(1)'s grids hold topology-only leaves. Loops: only the leaves of the grids every
+    /// frame shares (colour, scalar, tangent...), compressed once for every frame file. Call before
+    /// the first consume(). Returns false, and seals nothing, for other bakes (a gather engine's
+    /// still composes its leaves at the end) and when no grid would be sealed.
     bool sealLeaves(LeafSealer* sealer);
     /// Turn a finished brick into leaves. Thread-safe (called from the brick's worker).
     void consume(const BrickChannels& bricks);
@@ -229,6 +230,7 @@ private:
     openvdb::GridPtrVec mStatic;
     bool mStaticBuilt = false;
     LeafSealer* mSealer = nullptr;
+    bool mSealShared = false; ///< a loop: mSealer takes only the shared grids' leaves
 
     std::vector<Moments> mMoments; // per brick
     ChannelStats mRaw;
