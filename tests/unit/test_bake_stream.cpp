@@ -611,9 +611,10 @@ TEST_F(StreamBake, SealedLeavesWriteTheFileWholeLeavesWrite)
         EXPECT_EQ(a.substr(0, kUuid), b.substr(0, kUuid));
         EXPECT_TRUE(a.substr(kUuidEnd) == b.substr(kUuidEnd)) << "half " << half << ": sealed and whole leaves differ";
     }
-    // Loops seal only the grids every frame shares (colour, scalar, tangent, velocity, input):
-    // compressed once for all the frame files. Every frame must still be the file whole leaves
-    // give. Spot loops (comets, composed on arrival) and noise loops (composed per frame).
+    // Loops seal the grids every frame shares (colour, scalar, tangent, velocity, input):
+    // compressed once for all the frame files; comet loops also every frame's own grids. Every
+    // frame must still be the file whole leaves give. Spot loops (comets, composed on arrival) and
+    // noise loops (composed per frame).
     auto spotLoop = spotRecipe("sealed_loop.vdb");
     auto noiseLoop = recipe("sealed_noise_loop.vdb");
     for (auto* r : {&spotLoop, &noiseLoop}) {
@@ -628,6 +629,14 @@ TEST_F(StreamBake, SealedLeavesWriteTheFileWholeLeavesWrite)
             else ::setenv("LICVDB_SEAL_LEAVES", "0", 1);
             const auto summary = vdbexport::bake(*r);
             EXPECT_EQ(summary["sealed_leaves"].get<bool>(), seal) << r->output.path;
+            // A comet loop also seals every frame's density and halo (each frame's leaves under
+            // the grid's one name); a noise loop composes its frames at the end.
+            std::vector<std::string> sealedGrids{"input", "tangent", "velocity", "color", "scalar"};
+            if (r == &spotLoop) // three widths, each written (density_w<k>, halo_w<k>)
+                sealedGrids.insert(sealedGrids.begin(), {"density", "halo", "density_w1", "density_w2", "density_w3",
+                                                         "halo_w1", "halo_w2", "halo_w3"});
+            if (!seal) sealedGrids.clear();
+            EXPECT_EQ(summary["sealed_grids"].get<std::vector<std::string>>(), sealedGrids) << r->output.path;
             paths = summary["files"].get<std::vector<std::string>>();
             for (const auto& path : paths) frames[seal ? 0 : 1].push_back(fileBytes(path));
         }

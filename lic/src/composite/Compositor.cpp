@@ -153,18 +153,33 @@ bool Compositor::sealLeaves(LeafSealer* sealer)
 {
     // A spot still: every grid. A loop: the grids every frame shares (colour, scalar, tangent...),
     // final when their brick is consumed, so compressed once for all the frames instead of once
-    // per frame file. A gather engine's still composes its grids at the end: nothing.
+    // per frame file; a comet loop also every frame's own grids (density, halo, levels), composed
+    // as the bricks arrive (keepLoopBlock). A gather engine's still composes its grids at the end:
+    // nothing.
     if (!sealer) return false;
     const bool still = mSettings.composesOnArrival() && mSettings.frames == 1;
     if (!still && mSettings.frames == 1) return false;
+    const bool comets = !still && !mLoopBlocks.empty();
     std::vector<std::string> names;
     if (still) forEachStillSet([&](int, const auto& name, const auto&) { names.push_back(name()); });
-    else forEachShared([&](const OutputGridRow& row, const auto&) { names.push_back(std::string(row.name)); });
+    if (comets)
+        for (int v = 0; v < loopValues(); ++v) names.push_back(loopValueName(v));
+    if (!still) forEachShared([&](const OutputGridRow& row, const auto&) { names.push_back(std::string(row.name)); });
     if (names.empty()) return false;
     sealer->begin(names);
     mSealer = sealer;
     mSealShared = !still;
+    mSealFrames = comets;
     return true;
+}
+
+std::string Compositor::loopValueName(int v) const
+{
+    // loopValues()' order: density, halo, each level's lines, each level's halos.
+    const int K = mSettings.levels;
+    if (v < 2) return outputGridName(v == 0 ? OutputGrid::Density : OutputGrid::Halo);
+    if (v < 2 + K) return outputGridName(OutputGrid::LevelLines, v - 2 + 1);
+    return outputGridName(OutputGrid::LevelHalos, v - 2 - K + 1);
 }
 
 void Compositor::consume(const BrickChannels& bc)
@@ -179,7 +194,7 @@ void Compositor::consume(const BrickChannels& bc)
         if (bc.blockTouched && !bc.blockTouched[i]) continue;
         const std::size_t b = bc.brick->blocks[i];
         if (mSealShared) {
-            int g = 0;
+            int g = mSealFrames ? loopValues() : 0; // a comet loop's frame grids come first
             forEachShared([&](const OutputGridRow&, auto& set) { set.seal(b, *mSealer, g++); });
         } else {
             forEachStillSet([&](int g, const auto&, auto& set) { set.seal(b, *mSealer, g); });
@@ -310,12 +325,37 @@ void Compositor::keepLoopBlock(std::size_t b, const LoopStage& stage)
         }
     lb.count = std::uint32_t(n);
     if (n == 0) return;
+    if (mSealFrames) {
+        sealLoopBlock(b, stage, lb);
+        return;
+    }
     lb.values = std::make_unique_for_overwrite<float[]>(n * rows);
     for (std::size_t r = 0; r < rows; ++r) {
         const float* row = stage.values.data() + r * nc;
         float* dst = lb.values.get() + r * n;
         for (std::size_t j = 0; j < nc; ++j)
             if (stage.shows[j]) *dst++ = row[j];
+    }
+}
+
+void Compositor::sealLoopBlock(std::size_t b, const LoopStage& stage, LoopBlock& lb)
+{
+    // Each frame's and value's leaf as composeLoopLeaves would make it (the kept voxels' values
+    // on, every other value 0), handed to the sealer at once: one scratch leaf, the same voxels
+    // set in every row.
+    const std::size_t nc = stage.candidates, per = std::size_t(loopValues());
+    const std::size_t rows = std::size_t(mSettings.frames) * per;
+    thread_local FloatLeaf leaf;
+    leaf.setOrigin(mDomain.blockOrigin(b));
+    leaf.fill(0.0f, false);
+    leaf.setValueMask(lb.kept);
+    float* data = leaf.buffer().data();
+    lb.tags = std::make_unique_for_overwrite<std::uint32_t[]>(rows);
+    for (std::size_t r = 0; r < rows; ++r) {
+        const float* row = stage.values.data() + r * nc;
+        for (std::size_t j = 0; j < nc; ++j)
+            if (stage.shows[j]) data[stage.off[j]] = row[j];
+        lb.tags[r] = mSealer->seal(int(r % per), leaf);
     }
 }
 
@@ -329,9 +369,22 @@ void Compositor::composeLoopLeaves(int f, LeafSet<openvdb::FloatGrid>& density, 
         for (std::size_t b = range.begin(); b != range.end(); ++b) {
             const LoopBlock& lb = mLoopBlocks[b];
             if (lb.count == 0) continue;
+            const openvdb::Coord origin = mDomain.blockOrigin(b);
+            if (lb.tags) { // sealed (sealLoopBlock): the frame's topology-only leaves
+                const std::uint32_t* tags = lb.tags.get() + std::size_t(f - 1) * per;
+                auto put = [&](LeafSet<openvdb::FloatGrid>& set, std::size_t v) {
+                    set.put(b, topologyOnly<FloatLeaf>(origin, lb.kept, tags[v]));
+                };
+                put(density, 0);
+                put(halo, 1);
+                for (std::size_t k = 0; k < lines.size(); ++k) {
+                    put(lines[k], 2 + k);
+                    put(halos[k], 2 + K + k);
+                }
+                continue;
+            }
             const std::size_t n = lb.count;
             const float* v = lb.values.get() + std::size_t(f - 1) * per * n;
-            const openvdb::Coord origin = mDomain.blockOrigin(b);
             auto fill = [&](LeafSet<openvdb::FloatGrid>& set, const float* run) {
                 FloatLeaf& leaf = set.make(b, origin);
                 std::size_t i = 0;

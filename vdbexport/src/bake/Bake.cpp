@@ -201,7 +201,10 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     } else {
         tGather = writeDistributed(plan, fb, job, densityMeta, resolved, desc, progress, written);
     }
-    return summarise(recipe, plan, fb, job, written, desc.spots, since(t3), tGather, since(t0));
+    nlohmann::json summary = summarise(recipe, plan, fb, job, written, desc.spots, since(t3), tGather, since(t0));
+    // The grids whose leaves were sealed (compressed as their bricks finished), by name.
+    summary["sealed_grids"] = sealed ? sealed->names() : std::vector<std::string>{};
+    return summary;
 }
 
 } // namespace vdbexport

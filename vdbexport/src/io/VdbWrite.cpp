@@ -437,6 +437,13 @@ const SealedLeaves::Grid* SealedLeaves::find(const std::string& name) const
     return nullptr;
 }
 
+std::vector<std::string> SealedLeaves::names() const
+{
+    std::vector<std::string> out;
+    for (const auto& g : mGrids) out.push_back(g->name);
+    return out;
+}
+
 void writeVdbFile(const std::string& path, const openvdb::GridCPtrVec& grids, const openvdb::MetaMap& fileMetadata,
                   std::uint64_t holdBytes, const SealedLeaves* sealed)
 {

@@ -99,8 +99,10 @@ public:
                const OutputDomain& domain, const BrickLayout& layout);
 
     /// Spot stills: hand every leaf to `sealer` as soon as its brick is consumed (LeafSealer.h), so
-    /// that frame(1)'s grids hold topology-only leaves. Loops: only the leaves of the grids every
-    /// frame shares (colour, scalar, tangent...), compressed once for every frame file. Call before
+    /// that frame(1)'s grids hold topology-only leaves. Loops: the leaves of the grids every frame
+    /// shares (colour, scalar, tangent...), compressed once for every frame file; a comet loop
+    /// also every frame's density, halo and level leaves (each frame's under its grid's name, told
+    /// apart by their tags), so the loop holds its frames compressed. Call before
     /// the first consume(). Returns false, and seals nothing, for other bakes (a gather engine's
     /// still composes its leaves at the end) and when no grid would be sealed.
     bool sealLeaves(LeafSealer* sealer);
@@ -160,8 +162,14 @@ private:
     void composeLoopBlock(const BrickChannels& bc, std::size_t i, LoopStage& stage) const;
     /// Values per voxel and frame of a comet loop: density, halo (+ each level's line and halo).
     int loopValues() const { return 2 + (mSettings.series() ? 2 * mSettings.levels : 0); }
-    /// Store the shown candidates' values of a consumed block in mLoopBlocks[b].
+    /// The name of loop value v's grid (density, halo, `density_w<k>`, `halo_w<k>`).
+    std::string loopValueName(int v) const;
+    /// Store the shown candidates' values of a consumed block in mLoopBlocks[b] (sealed: their
+    /// leaves' tags).
     void keepLoopBlock(std::size_t b, const LoopStage& stage);
+    struct LoopBlock;
+    /// Seal every frame's leaves of a consumed block (grid = the loop value), keeping their tags.
+    void sealLoopBlock(std::size_t b, const LoopStage& stage, LoopBlock& lb);
     /// A comet loop's frame f leaves (density, halo, levels) from mLoopBlocks, on every core.
     void composeLoopLeaves(int f, LeafSet<openvdb::FloatGrid>& density, LeafSet<openvdb::FloatGrid>& halo,
                            std::vector<LeafSet<openvdb::FloatGrid>>& lines,
@@ -213,6 +221,9 @@ private:
     {
         openvdb::util::NodeMask<3> kept;
         std::unique_ptr<float[]> values;
+        /// Sealed (sealLeaves): instead of the values, each frame's and value's leaf tag,
+        /// frame-major ([frame][value]).
+        std::unique_ptr<std::uint32_t[]> tags;
         std::uint32_t count = 0;
     };
     std::vector<LoopBlock> mLoopBlocks;
@@ -230,7 +241,8 @@ private:
     openvdb::GridPtrVec mStatic;
     bool mStaticBuilt = false;
     LeafSealer* mSealer = nullptr;
-    bool mSealShared = false; ///< a loop: mSealer takes only the shared grids' leaves
+    bool mSealShared = false; ///< a loop: mSealer takes the shared grids' leaves (not a still's)
+    bool mSealFrames = false; ///< a comet loop: and every frame's own leaves (sealLoopBlock)
 
     std::vector<Moments> mMoments; // per brick
     ChannelStats mRaw;

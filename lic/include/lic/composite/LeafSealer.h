@@ -1,8 +1,10 @@
-// Sealed leaves: a spot still's output leaves handed, as each brick finishes, to whoever will write
+// Sealed leaves: a spot bake's output leaves handed, as each brick finishes, to whoever will write
 // them, which keeps what it needs (a file writer: the leaf's record as the file will hold it) so
 // that the leaf's 512 values can be dropped at once. The grids then hold the leaves' topology only
 // (origin and active mask), and the memory of a bake grows with its compressed output, not with
-// its float leaves: a 1024³ sparse bake holds ~1 GiB of records instead of 6 GiB of leaves.
+// its float leaves: a 1024³ sparse bake holds ~1 GiB of records instead of 6 GiB of leaves. A comet
+// loop seals every frame's leaves of a grid (`density` …) under that one grid: each frame's
+// topology-only leaves carry the tags of their own records.
 #pragma once
 
 #include <openvdb/openvdb.h>
@@ -30,16 +32,24 @@ public:
     virtual std::uint32_t seal(int grid, const openvdb::Vec3STree::LeafNodeType& leaf) = 0;
 };
 
-/// A leaf's topology-only copy: the same origin and active mask, no values (OpenVDB's partial
-/// leaf: its buffer is not allocated, LeafNode::isAllocated() is false), carrying `tag`.
+/// A topology-only leaf: `origin` and active mask `mask`, no values (OpenVDB's partial leaf: its
+/// buffer is not allocated, LeafNode::isAllocated() is false), carrying `tag`.
+template<typename LeafT>
+std::unique_ptr<LeafT> topologyOnly(const openvdb::Coord& origin, const typename LeafT::NodeMaskType& mask,
+                                    std::uint32_t tag)
+{
+    auto out = std::make_unique<LeafT>(openvdb::PartialCreate(), origin, openvdb::zeroVal<typename LeafT::ValueType>(),
+                                       false);
+    out->setValueMask(mask);
+    out->setTransientData(tag);
+    return out;
+}
+
+/// A leaf's topology-only copy: the same origin and active mask, carrying `tag`.
 template<typename LeafT>
 std::unique_ptr<LeafT> topologyOnly(const LeafT& leaf, std::uint32_t tag)
 {
-    auto out = std::make_unique<LeafT>(openvdb::PartialCreate(), leaf.origin(),
-                                       openvdb::zeroVal<typename LeafT::ValueType>(), false);
-    out->setValueMask(leaf.getValueMask());
-    out->setTransientData(tag);
-    return out;
+    return topologyOnly<LeafT>(leaf.origin(), leaf.getValueMask(), tag);
 }
 
 } // namespace lic

@@ -41,6 +41,8 @@ public:
         return l ? *l : make(b, origin);
     }
     void drop(std::size_t b) { mLeaves[b].reset(); }
+    /// Block b's leaf becomes `leaf` (e.g. a sealed leaf's topology-only copy).
+    void put(std::size_t b, std::unique_ptr<LeafT> leaf) { mLeaves[b] = std::move(leaf); }
     /// Hand block b's leaf (if any) to `sealer` as grid `grid`, and keep only its topology.
     void seal(std::size_t b, LeafSealer& sealer, int grid)
     {

@@ -1,4 +1,4 @@
-// A spot still's leaves sealed as its bricks finish (lic/composite/LeafSealer.h): each leaf's record
+// A spot bake's leaves sealed as its bricks finish (lic/composite/LeafSealer.h): each leaf's record
 // made at once, as the .vdb file will hold it (LeafNode::writeBuffers with the stream state
 // writeVdbFile gives its grid), so the leaf's values can be dropped; writeVdbFile then writes these
 // records for the grids' topology-only leaves. The file's bytes are the same as from whole leaves.
@@ -52,6 +52,8 @@ public:
     bool half() const { return mHalf; }
     /// The records of grid `name`, or null if none were sealed for it.
     const Grid* find(const std::string& name) const;
+    /// The grids begin() named, in its order.
+    std::vector<std::string> names() const;
 
 private:
     template<typename LeafT>
