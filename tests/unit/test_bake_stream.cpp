@@ -650,6 +650,20 @@ TEST_F(StreamBake, SealedLeavesWriteTheFileWholeLeavesWrite)
             EXPECT_TRUE(a.substr(kUuidEnd) == b.substr(kUuidEnd))
                 << r->output.path << " frame " << f + 1 << ": sealed and whole leaves differ";
         }
+        // A loop's records are spooled to an unnamed file in the output directory; without
+        // O_TMPFILE to a named one removed at once: the same frames, nothing left behind.
+        ::unsetenv("LICVDB_SEAL_LEAVES");
+        ::setenv("LICVDB_TEST_NO_O_TMPFILE", "1", 1);
+        const auto named = vdbexport::bake(*r);
+        ::unsetenv("LICVDB_TEST_NO_O_TMPFILE");
+        EXPECT_TRUE(named["sealed_leaves"].get<bool>());
+        for (std::size_t f = 0; f < 3; ++f) {
+            const std::string a = fileBytes(paths.at(f)), &b = frames[1][f];
+            ASSERT_EQ(a.size(), b.size()) << r->output.path << " frame " << f + 1 << " (named spool)";
+            EXPECT_TRUE(a.substr(21 + 36) == b.substr(21 + 36)) << r->output.path << " frame " << f + 1 << " (named spool)";
+        }
+        for (const auto& entry : fs::directory_iterator(fs::path(r->output.path).parent_path()))
+            EXPECT_EQ(entry.path().filename().string().rfind(".licvdb-spool", 0), std::string::npos) << entry.path();
         // Three different frames (the loop moves), the shared grids in each.
         EXPECT_NE(frames[0][0], frames[0][1]) << r->output.path;
         std::set<std::string> names;

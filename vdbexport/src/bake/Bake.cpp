@@ -22,6 +22,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <filesystem>
 #include <optional>
 #include <string>
 
@@ -175,9 +176,17 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     openvdb::initialize();
     // One process: a spot still's leaves are sealed (compressed for the file) as its bricks
     // finish, so the bake holds its compressed output instead of float leaves
-    // (vdbexport/io/SealedLeaves.h). LICVDB_SEAL_LEAVES=0 keeps whole leaves (the same file).
+    // (vdbexport/io/SealedLeaves.h); a loop's records, every frame's, are spooled to an unnamed
+    // file in the output directory. LICVDB_SEAL_LEAVES=0 keeps whole leaves (the same files).
     std::optional<detail::SealedLeaves> sealer;
-    if (!job.distributed() && pipeline::sealingAllowed()) sealer.emplace(recipe.output.half);
+    if (!job.distributed() && pipeline::sealingAllowed()) {
+        std::string spoolDir;
+        if (plan.frames > 1) {
+            spoolDir = std::filesystem::path(recipe.output.path).parent_path().string();
+            if (spoolDir.empty()) spoolDir = ".";
+        }
+        sealer.emplace(recipe.output.half, spoolDir);
+    }
     pipeline::FrameOptions frameOptions;
     frameOptions.sealer = sealer ? &*sealer : nullptr;
     FrameBake fb(plan, job, progress, std::move(frameOptions));

@@ -32,7 +32,9 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <set>
@@ -40,6 +42,9 @@
 #include <tuple>
 #include <type_traits>
 #include <utility>
+
+#include <fcntl.h>
+#include <unistd.h>
 
 namespace vdbexport::detail {
 
@@ -279,7 +284,7 @@ private:
         gd.setBlockPos(os.tellp());
 
         if (sealed) {
-            writeSealed(leaves, *sealed, os);
+            writeSealed(leaves, *sealed, *mSealed, os);
         } else if (hold) {
             for (Chunk& c : made) {
                 os.write(c.bytes.data(), std::streamsize(c.bytes.size()));
@@ -338,7 +343,8 @@ private:
 
     /// The sealed records of the grid's leaves, in the tree's order.
     template<typename GridT>
-    static void writeSealed(const LeafRecords<GridT>& leaves, const SealedLeaves::Grid& sealed, std::ostream& os)
+    static void writeSealed(const LeafRecords<GridT>& leaves, const SealedLeaves::Grid& sealed,
+                            const SealedLeaves& records, std::ostream& os)
     {
         // Gathered into runs of ~4 MiB: a file stream writes small records through its 8 KiB
         // buffer, a system call each time it fills.
@@ -346,7 +352,7 @@ private:
         run.reserve(kRunBytes + 65536);
         const std::size_t n = leaves.leafCount();
         for (std::size_t i = 0; i < n && os; ++i) {
-            run += leaves.sealed(i, sealed).bytes;
+            records.appendBytes(leaves.sealed(i, sealed), run);
             if (run.size() >= kRunBytes || i + 1 == n) {
                 os.write(run.data(), std::streamsize(run.size()));
                 run.clear();
@@ -393,6 +399,48 @@ std::uint32_t SealedLeaves::compression()
     return std::is_floating_point_v<T> ? (c & ~std::uint32_t(io::COMPRESS_ZIP)) : c;
 }
 
+SealedLeaves::SealedLeaves(bool half, const std::string& spoolDir)
+    : mHalf(half)
+    , mSpoolDir(spoolDir.empty() ? "" : "'" + spoolDir + "'")
+{
+    if (spoolDir.empty()) return;
+    // An unnamed file: nothing is left behind whatever becomes of the process. Without O_TMPFILE
+    // (or with the test seam LICVDB_TEST_NO_O_TMPFILE=1), a named one removed at once.
+    const char* noTmp = std::getenv("LICVDB_TEST_NO_O_TMPFILE");
+    if (!(noTmp && std::string(noTmp) == "1")) mSpool = ::open(spoolDir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
+    if (mSpool < 0) {
+        std::string name = (std::filesystem::path(spoolDir) / ".licvdb-spool-XXXXXX").string();
+        mSpool = ::mkostemp(name.data(), O_CLOEXEC);
+        if (mSpool >= 0) ::unlink(name.c_str());
+    }
+    if (mSpool < 0)
+        throw lic::Error("cannot make a spool file for a loop's compressed leaves in " + mSpoolDir + " ("
+                         + std::strerror(errno) + ")");
+}
+
+SealedLeaves::~SealedLeaves()
+{
+    if (mSpool >= 0) ::close(mSpool);
+}
+
+void SealedLeaves::appendBytes(const LeafRecord& r, std::string& out) const
+{
+    if (mSpool < 0) {
+        out += r.bytes;
+        return;
+    }
+    const std::size_t at = out.size();
+    out.resize(at + r.length);
+    for (std::size_t done = 0; done < r.length;) {
+        const ssize_t n = ::pread(mSpool, out.data() + at + done, r.length - done, off_t(r.spoolAt + done));
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0)
+            throw lic::Error("cannot read back the spooled leaves of a loop in " + mSpoolDir + " ("
+                             + (n < 0 ? std::strerror(errno) : "the spool file is short") + ")");
+        done += std::size_t(n);
+    }
+}
+
 void SealedLeaves::begin(const std::vector<std::string>& grids)
 {
     mGrids.clear();
@@ -419,7 +467,22 @@ std::uint32_t SealedLeaves::sealLeaf(int grid, const LeafT& leaf)
     r.origin = leaf.origin();
     std::tie(r.kind, r.size) = appendRecord(os, leaf, c, background, mHalf);
     if (!os) throw lic::Error("could not compress a leaf of grid '" + mGrids.at(std::size_t(grid))->name + "'");
-    r.bytes = os.view();
+    if (mSpool >= 0) {
+        // Written where a fetch_add reserves room: any thread, no lock.
+        const std::string_view bytes = os.view();
+        r.length = std::uint32_t(bytes.size());
+        r.spoolAt = mSpoolEnd.fetch_add(bytes.size());
+        for (std::size_t done = 0; done < bytes.size();) {
+            const ssize_t n = ::pwrite(mSpool, bytes.data() + done, bytes.size() - done, off_t(r.spoolAt + done));
+            if (n < 0 && errno == EINTR) continue;
+            if (n <= 0)
+                throw lic::Error("cannot spool the compressed leaves of a loop to " + mSpoolDir + " ("
+                                 + (n < 0 ? std::strerror(errno) : "nothing written") + "; disk full?)");
+            done += std::size_t(n);
+        }
+    } else {
+        r.bytes = os.view();
+    }
     auto& records = mGrids.at(std::size_t(grid))->records;
     const auto at = records.push_back(std::move(r));
     const auto index = std::size_t(at - records.begin());

@@ -2,6 +2,7 @@
 // made at once, as the .vdb file will hold it (LeafNode::writeBuffers with the stream state
 // writeVdbFile gives its grid), so the leaf's values can be dropped; writeVdbFile then writes these
 // records for the grids' topology-only leaves. The file's bytes are the same as from whole leaves.
+// A loop's records (every frame's) are spooled to an unnamed file beside its output.
 #pragma once
 
 #include <lic/composite/LeafSealer.h>
@@ -10,6 +11,7 @@
 
 #include <tbb/concurrent_vector.h>
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -18,12 +20,15 @@
 namespace vdbexport::detail {
 
 /// One leaf's record (LeafNode::writeBuffers' bytes) and what the grid's delayed-load table holds
-/// for it: the mask-compression kind and the compressed block's size.
+/// for it: the mask-compression kind and the compressed block's size. Spooled records keep their
+/// bytes in the spool file instead (`spoolAt`, `length`).
 struct LeafRecord
 {
     openvdb::Coord origin;
     std::string bytes;
     std::int64_t size = 0;
+    std::uint64_t spoolAt = 0;
+    std::uint32_t length = 0;
     std::int8_t kind = 0;
 };
 
@@ -40,7 +45,14 @@ public:
     /// `half`: the grids will be written as half floats (GridBase::saveFloatAsHalf). Records are
     /// made with the data compression writeVdbFile gives such a grid: io::Archive's default flags,
     /// without ZIP for float grids (fog volumes, as lic::LeafSet makes them).
-    explicit SealedLeaves(bool half) : mHalf(half) {}
+    /// `spoolDir` (a loop's output directory): the records' bytes go to an unnamed file there
+    /// (O_TMPFILE, else a named one removed at once) instead of memory, so a loop holds none of its
+    /// frames; empty = in memory (a still: its records are about its one file's size).
+    /// @throw lic::Error if the spool file cannot be made.
+    explicit SealedLeaves(bool half, const std::string& spoolDir = {});
+    ~SealedLeaves() override;
+    SealedLeaves(const SealedLeaves&) = delete;
+    SealedLeaves& operator=(const SealedLeaves&) = delete;
     /// That data compression, for leaves of value type T.
     template<typename T>
     static std::uint32_t compression();
@@ -50,6 +62,10 @@ public:
     std::uint32_t seal(int grid, const openvdb::Vec3STree::LeafNodeType& leaf) override;
 
     bool half() const { return mHalf; }
+    bool spooled() const { return mSpool >= 0; }
+    /// Append record `r`'s bytes to `out` (read back from the spool if spooled).
+    /// @throw lic::Error if the spool cannot be read.
+    void appendBytes(const LeafRecord& r, std::string& out) const;
     /// The records of grid `name`, or null if none were sealed for it.
     const Grid* find(const std::string& name) const;
     /// The grids begin() named, in its order.
@@ -61,6 +77,9 @@ private:
 
     bool mHalf;
     std::vector<std::unique_ptr<Grid>> mGrids;
+    int mSpool = -1;                       ///< the spool file, or −1
+    std::string mSpoolDir;                 ///< for messages
+    std::atomic<std::uint64_t> mSpoolEnd{0}; ///< bytes spooled (records are written at fetch_add)
 };
 
 } // namespace vdbexport::detail
