@@ -168,7 +168,6 @@ bool Compositor::sealLeaves(LeafSealer* sealer)
     if (names.empty()) return false;
     sealer->begin(names);
     mSealer = sealer;
-    mSealShared = !still;
     mSealFrames = comets;
     return true;
 }
@@ -193,7 +192,7 @@ void Compositor::consume(const BrickChannels& bc)
     for (std::size_t i = 0; i < bc.brick->blocks.size(); ++i) {
         if (bc.blockTouched && !bc.blockTouched[i]) continue;
         const std::size_t b = bc.brick->blocks[i];
-        if (mSealShared) {
+        if (mSettings.frames > 1) { // a loop: the shared grids (and its frames' in keepLoopBlock)
             int g = mSealFrames ? loopValues() : 0; // a comet loop's frame grids come first
             forEachShared([&](const OutputGridRow&, auto& set) { set.seal(b, *mSealer, g++); });
         } else {

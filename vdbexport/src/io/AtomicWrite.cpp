@@ -94,6 +94,12 @@ void commitAtomicWrite(const std::string& tmp, const std::string& path)
     }
 }
 
+bool noTmpfile()
+{
+    const char* v = std::getenv("LICVDB_TEST_NO_O_TMPFILE");
+    return v && std::string(v) == "1";
+}
+
 } // namespace detail
 
 void writeVdbAtomic(const std::string& path, openvdb::GridPtrVec grids, const openvdb::MetaMap& fileMetadata)

@@ -68,17 +68,6 @@ void commitHook(const std::string& point)
     else if (action.rfind("touch:", 0) == 0) std::ofstream(action.substr(6)).put('\n');
 }
 
-/// Test seam: $LICVDB_TEST_NO_O_TMPFILE=1 stages named temporaries, as on a file system without
-/// O_TMPFILE.
-bool noTmpfile()
-{
-    static const bool off = [] {
-        const char* v = std::getenv("LICVDB_TEST_NO_O_TMPFILE");
-        return v && std::string(v) == "1";
-    }();
-    return off;
-}
-
 } // namespace
 
 } // namespace detail

@@ -16,6 +16,7 @@
 // OpenVDB 10 to 13.
 #include "vdbexport/io/VdbWrite.h"
 #include "vdbexport/io/SealedLeaves.h"
+#include "vdbexport/io/AtomicWrite.h"
 
 #include <lic/util/Error.h>
 
@@ -32,7 +33,6 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstdint>
-#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -406,8 +406,7 @@ SealedLeaves::SealedLeaves(bool half, const std::string& spoolDir)
     if (spoolDir.empty()) return;
     // An unnamed file: nothing is left behind whatever becomes of the process. Without O_TMPFILE
     // (or with the test seam LICVDB_TEST_NO_O_TMPFILE=1), a named one removed at once.
-    const char* noTmp = std::getenv("LICVDB_TEST_NO_O_TMPFILE");
-    if (!(noTmp && std::string(noTmp) == "1")) mSpool = ::open(spoolDir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
+    if (!noTmpfile()) mSpool = ::open(spoolDir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
     if (mSpool < 0) {
         std::string name = (std::filesystem::path(spoolDir) / ".licvdb-spool-XXXXXX").string();
         mSpool = ::mkostemp(name.data(), O_CLOEXEC);

@@ -241,8 +241,7 @@ private:
     openvdb::GridPtrVec mStatic;
     bool mStaticBuilt = false;
     LeafSealer* mSealer = nullptr;
-    bool mSealShared = false; ///< a loop: mSealer takes the shared grids' leaves (not a still's)
-    bool mSealFrames = false; ///< a comet loop: and every frame's own leaves (sealLoopBlock)
+    bool mSealFrames = false; ///< a comet loop: mSealer also takes every frame's own leaves (sealLoopBlock)
 
     std::vector<Moments> mMoments; // per brick
     ChannelStats mRaw;

@@ -37,6 +37,11 @@ std::string prepareAtomicWrite(const std::string& path);
 /// O_TMPFILE cannot remove its named temporary; the next write of the same path does.
 void removeStaleTemporaries(const std::string& path);
 
+/// Test seam: $LICVDB_TEST_NO_O_TMPFILE=1 makes every writer that would open an unnamed file
+/// (O_TMPFILE: OutputSet's staged files, a loop's spool) use a named one instead, as on a file
+/// system without O_TMPFILE. Read on every call.
+bool noTmpfile();
+
 /// Flush `tmp` to disk, then rename it over `path`. Removes `tmp` and throws lic::Error on failure.
 void commitAtomicWrite(const std::string& tmp, const std::string& path);
 

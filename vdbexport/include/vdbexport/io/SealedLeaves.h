@@ -62,7 +62,6 @@ public:
     std::uint32_t seal(int grid, const openvdb::Vec3STree::LeafNodeType& leaf) override;
 
     bool half() const { return mHalf; }
-    bool spooled() const { return mSpool >= 0; }
     /// Append record `r`'s bytes to `out` (read back from the spool if spooled).
     /// @throw lic::Error if the spool cannot be read.
     void appendBytes(const LeafRecord& r, std::string& out) const;
