@@ -52,8 +52,11 @@ struct FastScratch
     std::vector<std::uint8_t> sumReady; // per local block: its sums zeroed (at its first deposit)
     std::vector<std::uint8_t> hits;  // per local voxel: deposits, saturating at 255
     std::vector<openvdb::Vec3d> pts; // the RK45 tracer's world positions
-    std::vector<openvdb::Vec3d> idxB, idxF, idx;  // output-index positions per side, assembled
-    std::vector<std::int64_t> locB, locF, loc;    // local voxel per sample (−1 = not ours)
+    // The line's samples in place: output-index position and local voxel (−1 = not ours) per
+    // sample, the seed at the middle, upstream written downwards from it and downstream upwards,
+    // so the line is one run of memory without assembling.
+    std::vector<openvdb::Vec3d> idx;
+    std::vector<std::int64_t> loc;
     std::vector<double> vals, win, norm, scratch; // samples, window sums, kernel weights
     std::vector<double> moved, movedWin, subNorm; // comet loops: moved texture, its window sums
 };
@@ -86,14 +89,14 @@ private:
     /// the side has done its job.
     struct Side
     {
-        std::vector<openvdb::Vec3d>* idx;
-        std::vector<std::int64_t>* loc;
+        openvdb::Vec3d* idx;     ///< the seed's slot; sample k of the side goes to idx[dir · k]
+        std::int64_t* loc;
+        std::ptrdiff_t dir;
+        std::ptrdiff_t count = 0; ///< samples recorded
         int run = 0, tail = -1;
     };
     /// Record a sample at field index `p`; false stops the side.
     bool onSample(Side& st, const openvdb::Vec3d& p);
-    /// Assemble upstream … seed … downstream into sc.idx / sc.loc; returns N.
-    std::size_t assemble(std::int64_t seedLocal, const openvdb::Coord& ijk);
     /// The texture (and ripple products) at every sample, then the window sums.
     void convolveLine(std::size_t N);
     /// Deposit the window averages of samples lo … hi into their voxels.
@@ -134,6 +137,9 @@ private:
     std::vector<double> mCopyShift, mCopyFade; // [phase][copy]
     int mTail; ///< samples traced past the last deposit: n, or n + P/h + 1 for comets
     std::size_t mWinLo = 1, mWinHi = 0; ///< comets: the line's stretch of non-zero windows
+    // The traced line: samples 0 … N−1 (upstream end first), in sc.idx / sc.loc.
+    const openvdb::Vec3d* mIdx = nullptr;
+    const std::int64_t* mLoc = nullptr;
 };
 
 } // namespace detail
@@ -276,8 +282,9 @@ bool FastLines<Texture, Ripple>::onSample(Side& st, const openvdb::Vec3d& p)
     const openvdb::Vec3d q(p[0] * mUp + mUpOff, p[1] * mUp + mUpOff, p[2] * mUp + mUpOff);
     const openvdb::Coord ijk = OutputDomain::nearestVoxel(q);
     const std::int64_t l = sc.index.localOf(ijk);
-    st.idx->push_back(q);
-    st.loc->push_back(l);
+    ++st.count;
+    st.idx[st.dir * st.count] = q;
+    st.loc[st.dir * st.count] = l;
     if (st.tail >= 0) return --st.tail > 0;
     if (l < 0 && !sc.index.inside(ijk)) {
         // Left the brick: trace on only to complete the windows of the samples inside.
@@ -293,16 +300,24 @@ template<typename Texture, bool Ripple>
 void FastLines<Texture, Ripple>::traceAndDeposit(std::int64_t seedLocal, const openvdb::Coord& ijk)
 {
     const openvdb::Vec3d seedIdx((ijk[0] - mUpOff) / mUp, (ijk[1] - mUpOff) / mUp, (ijk[2] - mUpOff) / mUp);
-    sc.idxB.clear();
-    sc.locB.clear();
-    sc.idxF.clear();
-    sc.locF.clear();
-    Side back{&sc.idxB, &sc.locB}, fwd{&sc.idxF, &sc.locF};
+    // Each side records at most maxSamples samples (traceIndexPair stops it there).
+    const std::size_t M = std::size_t(mTrace.maxSamples);
+    if (sc.idx.size() < 2 * M + 1) {
+        sc.idx.resize(2 * M + 1);
+        sc.loc.resize(2 * M + 1);
+    }
+    openvdb::Vec3d* mid = sc.idx.data() + M;
+    std::int64_t* midLoc = sc.loc.data() + M;
+    *mid = ijk.asVec3d();
+    *midLoc = seedLocal;
+    Side back{mid, midLoc, -1}, fwd{mid, midLoc, +1};
     const auto [whyB, whyF] = traceIndexPair(
         mField, seedIdx, mTrace, mStride, sc.pts, [&](const openvdb::Vec3d& p) { return onSample(back, p); },
         [&](const openvdb::Vec3d& p) { return onSample(fwd, p); });
     auto natural = [](StopReason why) { return why == StopReason::Boundary || why == StopReason::ZeroVelocity; };
-    const std::size_t B = sc.idxB.size(), N = assemble(seedLocal, ijk);
+    const std::size_t B = std::size_t(back.count), N = B + 1 + std::size_t(fwd.count);
+    mIdx = mid - back.count;
+    mLoc = midLoc - back.count;
     // Samples whose window runs past an artificial end (length limit, early stop, brick exit)
     // are not deposited; near a natural end the window is truncated exactly as in the naive
     // engine. The exp kernel only looks downstream, so the upstream end never cuts a window;
@@ -322,23 +337,6 @@ void FastLines<Texture, Ripple>::traceAndDeposit(std::int64_t seedLocal, const o
 }
 
 template<typename Texture, bool Ripple>
-std::size_t FastLines<Texture, Ripple>::assemble(std::int64_t seedLocal, const openvdb::Coord& ijk)
-{
-    const std::size_t B = sc.idxB.size(), F = sc.idxF.size(), N = B + 1 + F;
-    sc.idx.resize(N);
-    sc.loc.resize(N);
-    for (std::size_t i = 0; i < B; ++i) {
-        sc.idx[i] = sc.idxB[B - 1 - i];
-        sc.loc[i] = sc.locB[B - 1 - i];
-    }
-    sc.idx[B] = ijk.asVec3d();
-    sc.loc[B] = seedLocal;
-    std::copy(sc.idxF.begin(), sc.idxF.end(), sc.idx.begin() + std::ptrdiff_t(B + 1));
-    std::copy(sc.locF.begin(), sc.locF.end(), sc.loc.begin() + std::ptrdiff_t(B + 1));
-    return N;
-}
-
-template<typename Texture, bool Ripple>
 void FastLines<Texture, Ripple>::convolveLine(std::size_t N)
 {
     sc.vals.resize(N * W);
@@ -346,7 +344,7 @@ void FastLines<Texture, Ripple>::convolveLine(std::size_t N)
     sc.norm.resize(N);
     float v[P];
     for (std::size_t i = 0; i < N; ++i) {
-        mTexture.sampleGradient(sc.idx[i], v, v + C);
+        mTexture.sampleGradient(mIdx[i], v, v + C);
         double* o = &sc.vals[i * W];
         for (int c = 0; c < P; ++c) o[c] = v[c];
         if constexpr (Ripple) {
@@ -366,14 +364,14 @@ template<typename Texture, bool Ripple>
 void FastLines<Texture, Ripple>::deposit(std::size_t lo, std::size_t hi)
 {
     for (std::size_t i = lo; i <= hi; ++i) {
-        const std::int64_t l = sc.loc[i];
+        const std::int64_t l = mLoc[i];
         if (l < 0) continue;
         const double inv = 1.0 / sc.norm[i];
         // First-order correction from the sample point to the voxel centre: the window average of
         // the texture gradient applied to the offset δ (the streamline through the centre is, to
         // first order, this one shifted by δ). Deposits are weighted by 1/(1 + 10|δ|²)², so passes
         // near the centre dominate a voxel's average.
-        const openvdb::Vec3d off = OutputDomain::nearestVoxel(sc.idx[i]).asVec3d() - sc.idx[i];
+        const openvdb::Vec3d off = OutputDomain::nearestVoxel(mIdx[i]).asVec3d() - mIdx[i];
         const double r2 = 1.0 + off.lengthSqr() * kDepositFalloff;
         const double w = 1.0 / (r2 * r2);
         const double* Wi = &sc.win[i * W];
@@ -428,7 +426,7 @@ void FastLines<Texture, Ripple>::convolveComets(std::size_t N, bool endBack, boo
         const double back = endBack ? -0.5 : -1e300, fwd = endFwd ? double(N) - 0.5 : 1e300;
         std::size_t lo = N, hi = 0;
         for (std::size_t i = 0; i < N; ++i) {
-            mTexture.forEachSpot(sc.idx[i], [&](std::uint32_t s, const float* v, const float* g) {
+            mTexture.forEachSpot(mIdx[i], [&](std::uint32_t s, const float* v, const float* g) {
                 const std::size_t phase = std::size_t(cometPhase(mTexture.centre(s), mFrames));
                 for (std::size_t f = 0; f < F; ++f) {
                     const std::size_t ph = (f + phase) % F;
@@ -481,12 +479,12 @@ void FastLines<Texture, Ripple>::depositComets(std::size_t lo, std::size_t hi)
 {
     const std::size_t F = std::size_t(mFrames), Wf = F * std::size_t(P);
     for (std::size_t i = lo; i <= hi; ++i) {
-        const std::int64_t l = sc.loc[i];
+        const std::int64_t l = mLoc[i];
         if (l < 0) continue;
         const std::size_t s = std::size_t(l);
         float* acc = readySum(s); // also where every window is 0: the voxel's weight grows below
         // As deposit(): the first-order correction to the voxel centre, proximity-weighted.
-        const openvdb::Vec3d off = OutputDomain::nearestVoxel(sc.idx[i]).asVec3d() - sc.idx[i];
+        const openvdb::Vec3d off = OutputDomain::nearestVoxel(mIdx[i]).asVec3d() - mIdx[i];
         const double r2 = 1.0 + off.lengthSqr() * kDepositFalloff;
         const double w = 1.0 / (r2 * r2);
         if (i >= mWinLo && i <= mWinHi) { // elsewhere every frame's window is 0

@@ -100,8 +100,8 @@ public:
     /// Nearest output voxel of a continuous output-index position.
     static openvdb::Coord nearestVoxel(const openvdb::Vec3d& p)
     {
-        return openvdb::Coord(int(std::floor(p[0] + 0.5)), int(std::floor(p[1] + 0.5)),
-                              int(std::floor(p[2] + 0.5)));
+        return openvdb::Coord(detail::floorIndex(p[0] + 0.5), detail::floorIndex(p[1] + 0.5),
+                              detail::floorIndex(p[2] + 0.5));
     }
 
     /// World position of an output voxel's centre.

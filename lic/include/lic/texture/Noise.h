@@ -109,8 +109,9 @@ public:
     /// Trilinear value and, if `grad` is non-null, its gradient (d/di, d/dj, d/dk).
     [[gnu::always_inline]] void sampleGradient(const openvdb::Vec3d& p, float* out, float* grad) const
     {
-        const double fx0 = std::floor(p[0]), fy0 = std::floor(p[1]), fz0 = std::floor(p[2]);
-        const int i = int(fx0) - mLo[0], j = int(fy0) - mLo[1], k = int(fz0) - mLo[2];
+        const int xi = detail::floorIndex(p[0]), yi = detail::floorIndex(p[1]), zi = detail::floorIndex(p[2]);
+        const double fx0 = double(xi), fy0 = double(yi), fz0 = double(zi);
+        const int i = xi - mLo[0], j = yi - mLo[1], k = zi - mLo[2];
         const float fx = float(p[0] - fx0), fy = float(p[1] - fy0), fz = float(p[2] - fz0);
         // The bricked offset is a sum of per-axis terms, so the eight corners cost six clamps.
         const std::size_t X0 = axisX(i), X1 = axisX(i + 1), Y0 = axisY(j), Y1 = axisY(j + 1);
