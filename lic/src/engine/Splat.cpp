@@ -595,24 +595,24 @@ void SplatRun::nearestPoints(const SpotLine& L, const Brick& brick, SplatScratch
         const openvdb::Vec3f c = P[j], dir = T[j];
         const bool end = j == 0 || j == L.count - 1;
         const float slab = 0.5f * float(kCoarse * h) + 0.5f, invH = float(1.0 / h);
-        const int x0 = std::max(bmin[0], int(std::ceil(c[0] - rho))), x1 = std::min(bmax[0], int(std::floor(c[0] + rho)));
+        const int x0 = std::max(bmin[0], detail::ceilIndex(c[0] - rho)), x1 = std::min(bmax[0], detail::floorIndex(c[0] + rho));
         for (int x = x0; x <= x1; ++x) {
             const float dx = float(x) - c[0], ry2 = float(rho * rho) - dx * dx;
             if (ry2 < 0) continue;
             const float ry = std::sqrt(ry2);
-            const int y0 = std::max(bmin[1], int(std::ceil(c[1] - ry))), y1 = std::min(bmax[1], int(std::floor(c[1] + ry)));
+            const int y0 = std::max(bmin[1], detail::ceilIndex(c[1] - ry)), y1 = std::min(bmax[1], detail::floorIndex(c[1] + ry));
             for (int y = y0; y <= y1; ++y) {
                 const float dy = float(y) - c[1], rz2 = ry2 - dy * dy;
                 if (rz2 < 0) continue;
                 const float rz = std::sqrt(rz2);
-                const int z0 = std::max(bmin[2], int(std::ceil(c[2] - rz))), z1 = std::min(bmax[2], int(std::floor(c[2] + rz)));
+                const int z0 = std::max(bmin[2], detail::ceilIndex(c[2] - rz)), z1 = std::min(bmax[2], detail::floorIndex(c[2] + rz));
                 const float pxy = dx * dir[0] + dy * dir[1];
                 for (int z = z0; z <= z1; ++z) {
                     const float along = pxy + (float(z) - c[2]) * dir[2];
                     if (!end && std::abs(along) > slab) continue;
                     const std::int64_t l = bi.localOf(openvdb::Coord(x, y, z));
                     if (l < 0) continue;
-                    const int jf = std::clamp(j + int(std::floor(along * invH + 0.5f)), 0, L.count - 1);
+                    const int jf = std::clamp(j + detail::floorIndex(along * invH + 0.5f), 0, L.count - 1);
                     const openvdb::Vec3f w = openvdb::Vec3f(float(x), float(y), float(z)) - P[jf];
                     const float a = w.dot(T[jf]);
                     const float d2 = w.lengthSqr() - a * a;

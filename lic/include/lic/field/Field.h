@@ -60,6 +60,14 @@ namespace detail {
     const int i = int(x);
     return double(i) > x ? i - 1 : i;
 }
+[[gnu::always_inline]] inline int floorIndex(float x)
+{
+    const int i = int(x);
+    return float(i) > x ? i - 1 : i;
+}
+/// std::ceil for |x| < 2³¹, as an int, without a call (see floorIndex).
+[[gnu::always_inline]] inline int ceilIndex(double x) { return -floorIndex(-x); }
+[[gnu::always_inline]] inline int ceilIndex(float x) { return -floorIndex(-x); }
 } // namespace detail
 
 /// The velocity field of a bake: a Vec3 grid whose values are world-space vectors, placed in the
