@@ -2,6 +2,7 @@
 
 #include "LeafTable.h"
 #include "lic/util/Error.h"
+#include "lic/util/IndexMath.h"
 #include "lic/util/Parallel.h"
 
 #include <openvdb/tools/Dense.h>
@@ -699,8 +700,8 @@ private:
     /// (the test mispredicts about half of the time at half-voxel steps).
     [[gnu::always_inline]] void moveTo(const openvdb::Vec3d& q, float* w)
     {
-        const double fx0 = std::floor(q[0]), fy0 = std::floor(q[1]), fz0 = std::floor(q[2]);
-        int ix = int(fx0), iy = int(fy0), iz = int(fz0);
+        int ix = detail::floorIndex(q[0]), iy = detail::floorIndex(q[1]), iz = detail::floorIndex(q[2]);
+        const double fx0 = double(ix), fy0 = double(iy), fz0 = double(iz);
         ix = std::clamp(ix, 0, mLast[0]);
         iy = std::clamp(iy, 0, mLast[1]);
         iz = std::clamp(iz, 0, mLast[2]);

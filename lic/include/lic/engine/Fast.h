@@ -437,7 +437,7 @@ void FastLines<Texture, Ripple>::convolveComets(std::size_t N, bool endBack, boo
                         if (endBack || endFwd) amp *= std::clamp(std::min(fwd - j, j - back) * h / mRamp, 0.0, 1.0);
                         if (!(amp > 0)) continue;
                         // Shared by the two samples around arc j, linearly.
-                        const double j0 = std::floor(j), t = j - j0;
+                        const double j0 = double(detail::floorIndex(j)), t = j - j0;
                         for (int e = 0; e < 2; ++e) {
                             const double at = j0 + double(e), w = amp * (e ? t : 1.0 - t);
                             if (at < 0 || at >= double(N) || w == 0) continue;

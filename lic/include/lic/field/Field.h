@@ -1,6 +1,8 @@
 // A world-space velocity field on an OpenVDB Vec3 grid, with fast trilinear sampling.
 #pragma once
 
+#include "lic/util/IndexMath.h"
+
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Dense.h>
 
@@ -48,27 +50,6 @@ struct FieldExtent
     /// (plus one for the trilinear footprint).
     openvdb::CoordBBox region;
 };
-
-namespace detail {
-/// std::clamp for ints, always inlined: in the tracer's long lockstep loop GCC stops inlining
-/// std::clamp (it takes references) and calls it 35 times per step pair.
-[[gnu::always_inline]] inline int clampIndex(int v, int lo, int hi) { return v < lo ? lo : (hi < v ? hi : v); }
-/// std::floor for |x| < 2³¹ (as int and as double), without a call: x86-64's baseline has no
-/// rounding instruction, so std::floor is a call into libm.
-[[gnu::always_inline]] inline int floorIndex(double x)
-{
-    const int i = int(x);
-    return double(i) > x ? i - 1 : i;
-}
-[[gnu::always_inline]] inline int floorIndex(float x)
-{
-    const int i = int(x);
-    return float(i) > x ? i - 1 : i;
-}
-/// std::ceil for |x| < 2³¹, as an int, without a call (see floorIndex).
-[[gnu::always_inline]] inline int ceilIndex(double x) { return -floorIndex(-x); }
-[[gnu::always_inline]] inline int ceilIndex(float x) { return -floorIndex(-x); }
-} // namespace detail
 
 /// The velocity field of a bake: a Vec3 grid whose values are world-space vectors, placed in the
 /// world by the grid's transform.

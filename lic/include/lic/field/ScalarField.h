@@ -73,8 +73,9 @@ class ScalarField
     Axis axis(int a, double idx) const
     {
         const double x = std::clamp(idx, mLo[a], mHi[a]) - mLo[a];
-        const double fl = std::floor(x);
-        const int i = std::clamp(int(fl) - mOff[a], 0, mDim[a] - 1); // mOff = 0 for a whole grid
+        const int xi = detail::floorIndex(x); // std::floor's integer, without the baseline's long inline floor
+        const double fl = double(xi);
+        const int i = std::clamp(xi - mOff[a], 0, mDim[a] - 1); // mOff = 0 for a whole grid
         return {std::size_t(i) * mStride[a], std::size_t(std::min(i + 1, mDim[a] - 1)) * mStride[a], x - fl};
     }
 

@@ -7,6 +7,7 @@
 #pragma once
 
 #include "lic/util/Error.h"
+#include "lic/util/IndexMath.h"
 #include "lic/util/Names.h"
 
 #include <openvdb/openvdb.h>
@@ -192,8 +193,8 @@ private:
     template<typename Fn>
     void visit(const openvdb::Vec3d& p, Fn&& fn) const
     {
-        const std::array<int, 3> c0{int(std::floor(p[0] / mCell - 0.5)), int(std::floor(p[1] / mCell - 0.5)),
-                                    int(std::floor(p[2] / mCell - 0.5))};
+        const std::array<int, 3> c0{detail::floorIndex(p[0] / mCell - 0.5), detail::floorIndex(p[1] / mCell - 0.5),
+                                    detail::floorIndex(p[2] / mCell - 0.5)};
         for (int dx = 0; dx < 2; ++dx)
             for (int dy = 0; dy < 2; ++dy)
                 for (int dz = 0; dz < 2; ++dz) {
@@ -231,7 +232,7 @@ private:
 
     std::array<int, 3> cellCoord(const openvdb::Vec3d& p) const
     {
-        return {int(std::floor(p[0] / mCell)), int(std::floor(p[1] / mCell)), int(std::floor(p[2] / mCell))};
+        return {detail::floorIndex(p[0] / mCell), detail::floorIndex(p[1] / mCell), detail::floorIndex(p[2] / mCell)};
     }
     std::size_t cellIndex(const std::array<int, 3>& c) const
     {
