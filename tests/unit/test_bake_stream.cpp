@@ -583,18 +583,18 @@ TEST_F(StreamBake, SealedLeavesWriteTheFileWholeLeavesWrite)
     {
         ~EnvGuard() { ::unsetenv("LICVDB_SEAL_LEAVES"); }
     } guard;
-    for (const bool half : {false, true}) {
+    for (const bool halfFloats : {false, true}) {
         // The same path both times (the recipe, path included, is in the file's metadata).
         std::string bytes[2];
-        auto r = spotRecipe(std::string("sealed") + (half ? "_half" : "") + ".vdb");
-        r.output.half = half;
+        auto r = spotRecipe(std::string("sealed") + (halfFloats ? "_half" : "") + ".vdb");
+        r.output.half = halfFloats;
         r.output.grids.setKey("write_input", true);
         r.output.grids.setKey("write_velocity", true);
         for (const bool seal : {true, false}) {
             if (seal) ::unsetenv("LICVDB_SEAL_LEAVES");
             else ::setenv("LICVDB_SEAL_LEAVES", "0", 1);
             const auto summary = vdbexport::bake(r);
-            EXPECT_EQ(summary["sealed_leaves"].get<bool>(), seal) << "half " << half;
+            EXPECT_EQ(summary["sealed_leaves"].get<bool>(), seal) << "half " << halfFloats;
             bytes[seal ? 0 : 1] = fileBytes(r.output.path);
             if (seal) {
                 std::set<std::string> names;
@@ -606,10 +606,10 @@ TEST_F(StreamBake, SealedLeavesWriteTheFileWholeLeavesWrite)
         }
         const std::string &a = bytes[0], &b = bytes[1];
         ASSERT_GT(a.size(), 10000u);
-        ASSERT_EQ(a.size(), b.size()) << "half " << half;
+        ASSERT_EQ(a.size(), b.size()) << "half " << halfFloats;
         constexpr std::size_t kUuid = 21, kUuidEnd = 21 + 36; // the header's random UUID
         EXPECT_EQ(a.substr(0, kUuid), b.substr(0, kUuid));
-        EXPECT_TRUE(a.substr(kUuidEnd) == b.substr(kUuidEnd)) << "half " << half << ": sealed and whole leaves differ";
+        EXPECT_TRUE(a.substr(kUuidEnd) == b.substr(kUuidEnd)) << "half " << halfFloats << ": sealed and whole leaves differ";
     }
     // Loops seal the grids every frame shares (colour, scalar, tangent, velocity, input):
     // compressed once for all the frame files; comet loops also every frame's own grids. Every

@@ -180,12 +180,8 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     // file in the output directory. LICVDB_SEAL_LEAVES=0 keeps whole leaves (the same files).
     std::optional<detail::SealedLeaves> sealer;
     if (!job.distributed() && pipeline::sealingAllowed()) {
-        std::string spoolDir;
-        if (plan.frames > 1) {
-            spoolDir = std::filesystem::path(recipe.output.path).parent_path().string();
-            if (spoolDir.empty()) spoolDir = ".";
-        }
-        sealer.emplace(recipe.output.half, spoolDir);
+        sealer.emplace(recipe.output.half,
+                       plan.frames > 1 ? pipeline::outputDirectory(recipe.output.path) : std::string());
     }
     pipeline::FrameOptions frameOptions;
     frameOptions.sealer = sealer ? &*sealer : nullptr;

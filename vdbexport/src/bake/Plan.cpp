@@ -16,6 +16,12 @@ namespace vdbexport::pipeline {
 
 namespace fs = std::filesystem;
 
+std::string outputDirectory(const std::string& out)
+{
+    const fs::path dir = fs::path(out).parent_path();
+    return dir.empty() ? std::string(".") : dir.string();
+}
+
 namespace {
 
 /// Refuse recipe features that later releases add, and combinations that mean nothing, rather
@@ -66,8 +72,7 @@ std::string relativeToCwd(const fs::path& p)
 
 void checkOutputDirectory(const std::string& out)
 {
-    fs::path dir = fs::path(out).parent_path();
-    if (dir.empty()) dir = ".";
+    const fs::path dir = outputDirectory(out);
     std::error_code ec;
     if (!fs::is_directory(dir, ec)) {
         throw lic::InputError("output directory \"" + dir.string() + "\" does not exist (for --out " + out + ")" +

@@ -6,6 +6,7 @@
 
 #include "lic/engine/Settings.h"
 
+#include <string>
 #include <vector>
 
 namespace vdbexport::pipeline {
@@ -27,6 +28,9 @@ struct Plan
     /// Spots: the largest halo radius (output voxels), how far a spot's texture reaches.
     double maxSpotRadius = 0.0;
 };
+
+/// The directory an output path writes into: its parent, or "." for a bare file name.
+std::string outputDirectory(const std::string& out);
 
 /// Validate the recipe (values, paths, combinations, features not available yet) and plan the
 /// bake. @throw lic::InputError naming the first problem.
