@@ -15,6 +15,23 @@
 using namespace lic;
 using openvdb::Vec3d;
 
+// The hot loops' integer floor and ceil give std::floor's and std::ceil's integers, float and double,
+// on both sides of zero, at integers and half-integers and just either side of them.
+TEST(IndexMath, FloorAndCeilMatchTheStandardOnes)
+{
+    for (int k = -4000; k <= 4000; ++k) {
+        const double x = k * 0.125;
+        for (const double v : {x, std::nextafter(x, -1e9), std::nextafter(x, 1e9)}) {
+            ASSERT_EQ(lic::detail::floorIndex(v), int(std::floor(v))) << v;
+            ASSERT_EQ(lic::detail::ceilIndex(v), int(std::ceil(v))) << v;
+            const float f = float(v);
+            ASSERT_EQ(lic::detail::floorIndex(f), int(std::floor(f))) << f;
+            ASSERT_EQ(lic::detail::ceilIndex(f), int(std::ceil(f))) << f;
+        }
+    }
+    for (int a = -20; a <= 20; ++a) ASSERT_EQ(lic::detail::floorDiv(a, 8), int(std::floor(a / 8.0))) << a;
+}
+
 TEST(Field, LinearFieldIsSampledExactly)
 {
     VelocityField field(lictest::rotationField(21));

@@ -701,7 +701,6 @@ private:
     [[gnu::always_inline]] void moveTo(const openvdb::Vec3d& q, float* w)
     {
         int ix = detail::floorIndex(q[0]), iy = detail::floorIndex(q[1]), iz = detail::floorIndex(q[2]);
-        const double fx0 = double(ix), fy0 = double(iy), fz0 = double(iz);
         ix = std::clamp(ix, 0, mLast[0]);
         iy = std::clamp(iy, 0, mLast[1]);
         iz = std::clamp(iz, 0, mLast[2]);

@@ -12,11 +12,6 @@
 
 namespace lic {
 
-namespace detail {
-/// a / b rounded towards −∞ (b > 0): the block or brick of a possibly negative coordinate.
-inline int floorDiv(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
-} // namespace detail
-
 /// Output voxel j (per axis) has its centre at field index (j + ½)/K − ½, K = upsample, so field
 /// voxel i is split exactly into output voxels K·i … K·i + K − 1 and both volumes cover the same
 /// world box. An output voxel is active when the field voxel containing it is active.

@@ -1,4 +1,4 @@
-// Integer clamp, floor and ceil for the hot loops, always inlined. x86-64's baseline has no
+// Integer clamp, floor, ceil and floor division for the hot loops, always inlined. x86-64's baseline has no
 // rounding instruction: std::floor is a call into libm or a long inline sequence, while these are
 // a conversion, a compare and a subtract, with the same integer for |x| < 2³¹.
 #pragma once
@@ -23,6 +23,8 @@ namespace detail {
 /// std::ceil for |x| < 2³¹, as an int, without a call (see floorIndex).
 [[gnu::always_inline]] inline int ceilIndex(double x) { return -floorIndex(-x); }
 [[gnu::always_inline]] inline int ceilIndex(float x) { return -floorIndex(-x); }
+/// a / b rounded towards −∞ (b > 0): the block or brick of a possibly negative coordinate.
+inline int floorDiv(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 } // namespace detail
 
 } // namespace lic
