@@ -53,35 +53,50 @@ int cometPhase(const openvdb::Vec3d& centre, int frames)
 
 namespace detail {
 
-void windowSums(KernelType kernel, double decay, int n, std::size_t N, int W, const double* vals, double* win,
-                double* norm, std::vector<double>& scratch)
+namespace {
+// WC > 0: W known at compile time (the fast engine's noise lines, W = 4), so the per-sample loops
+// over the channels unroll into vector code; WC = 0: W at run time. The same operations, in the same
+// order, either way.
+template<int WC>
+void windowSumsW(KernelType kernel, double decay, int n, std::size_t N, int Wrt, const double* vals, double* win,
+                 double* norm, std::vector<double>& scratch)
 {
+    const std::size_t W = WC > 0 ? std::size_t(WC) : std::size_t(Wrt);
     const std::size_t nn = std::size_t(n);
     // N + 1 rows of W, of which only the one read before it is written is cleared (a comet loop's
     // W = N·4C made clearing them all 6 % of its time); the scratch only grows.
-    if (scratch.size() < (N + 1) * std::size_t(W)) scratch.resize((N + 1) * std::size_t(W));
+    if (scratch.size() < (N + 1) * W) scratch.resize((N + 1) * W);
+    double* S = scratch.data();
     if (kernel == KernelType::Box) {
-        std::fill_n(scratch.begin(), W, 0.0); // prefix sums, P_0 = 0
+        std::fill_n(S, W, 0.0); // prefix sums, P_0 = 0
         for (std::size_t i = 0; i < N; ++i)
-            for (int c = 0; c < W; ++c) scratch[(i + 1) * W + c] = scratch[i * W + c] + vals[i * W + c];
+            for (std::size_t c = 0; c < W; ++c) S[(i + 1) * W + c] = S[i * W + c] + vals[i * W + c];
         for (std::size_t i = 0; i < N; ++i) {
             const std::size_t a = i >= nn ? i - nn : 0, b = std::min(N - 1, i + nn);
-            for (int c = 0; c < W; ++c) win[i * W + c] = scratch[(b + 1) * W + c] - scratch[a * W + c];
+            for (std::size_t c = 0; c < W; ++c) win[i * W + c] = S[(b + 1) * W + c] - S[a * W + c];
             norm[i] = double(b - a + 1);
         }
         return;
     }
-    std::fill_n(scratch.begin() + std::ptrdiff_t(N * std::size_t(W)), W, 0.0); // E_i, with E_N = 0
+    std::fill_n(S + N * W, W, 0.0); // E_i, with E_N = 0
     for (std::size_t i = N; i-- > 0;)
-        for (int c = 0; c < W; ++c) scratch[i * W + c] = vals[i * W + c] + decay * scratch[(i + 1) * W + c];
+        for (std::size_t c = 0; c < W; ++c) S[i * W + c] = vals[i * W + c] + decay * S[(i + 1) * W + c];
     const double cn1 = std::pow(decay, double(n + 1));
     for (std::size_t i = 0; i < N; ++i) {
         const std::size_t end = i + nn + 1; // first sample past the window
-        for (int c = 0; c < W; ++c)
-            win[i * W + c] = scratch[i * W + c] - (end < N ? cn1 * scratch[end * W + c] : 0.0);
+        for (std::size_t c = 0; c < W; ++c)
+            win[i * W + c] = S[i * W + c] - (end < N ? cn1 * S[end * W + c] : 0.0);
         const double K = double(std::min(nn, N - 1 - i)); // window is samples i … i+K
         norm[i] = (1.0 - std::pow(decay, K + 1.0)) / (1.0 - decay);
     }
+}
+} // namespace
+
+void windowSums(KernelType kernel, double decay, int n, std::size_t N, int W, const double* vals, double* win,
+                double* norm, std::vector<double>& scratch)
+{
+    if (W == 4) windowSumsW<4>(kernel, decay, n, N, W, vals, win, norm, scratch);
+    else windowSumsW<0>(kernel, decay, n, N, W, vals, win, norm, scratch);
 }
 
 int ripplePeriod(const LicSettings& settings)

@@ -363,10 +363,16 @@ void FastLines<Texture, Ripple>::convolveLine(std::size_t N)
 template<typename Texture, bool Ripple>
 void FastLines<Texture, Ripple>::deposit(std::size_t lo, std::size_t hi)
 {
+    // Runs of samples share a kernel weight (all but the windows cut by a natural end), so its
+    // reciprocal is taken once per run: the same value, without a division per deposit.
+    double norm = 0.0, inv = 0.0;
     for (std::size_t i = lo; i <= hi; ++i) {
         const std::int64_t l = mLoc[i];
         if (l < 0) continue;
-        const double inv = 1.0 / sc.norm[i];
+        if (sc.norm[i] != norm) {
+            norm = sc.norm[i];
+            inv = 1.0 / norm;
+        }
         // First-order correction from the sample point to the voxel centre: the window average of
         // the texture gradient applied to the offset δ (the streamline through the centre is, to
         // first order, this one shifted by δ). Deposits are weighted by 1/(1 + 10|δ|²)², so passes

@@ -151,14 +151,42 @@ struct IndexSide
     StopReason why = StopReason::Length;
 };
 
+/// The cubic Hermite basis {h00, h10, h01, h11} at t = j/m (the interpolation between a long
+/// step's end points).
+constexpr void hermiteBasis(int j, int m, double* h)
+{
+    const double t = double(j) / double(m), t2 = t * t, t3 = t2 * t;
+    h[0] = 2 * t3 - 3 * t2 + 1;
+    h[1] = t3 - 2 * t2 + t;
+    h[2] = 3 * t2 - 2 * t3;
+    h[3] = t3 - t2;
+}
+
+/// hermiteBasis for 1 ≤ j < m ≤ kMaxStride (the automatic strides), evaluated once at compile
+/// time: IEEE double, round to nearest, so the same bits as at run time.
+struct HermiteTable
+{
+    static constexpr int kMaxStride = 8;
+    double h[kMaxStride + 1][kMaxStride][4] = {};
+    constexpr HermiteTable()
+    {
+        for (int m = 2; m <= kMaxStride; ++m)
+            for (int j = 1; j < m; ++j) hermiteBasis(j, m, h[m][j]);
+    }
+};
+inline constexpr HermiteTable kHermite{};
+
 /// Emit the samples of an accepted long step x → x1 (Hermite between the end points, x1 last).
 template<typename OnSample>
 bool emitLongStep(IndexSide& s, int m, double H, const openvdb::Vec3d& x1, const openvdb::Vec3d& d1, OnSample& on)
 {
     const openvdb::Vec3d t0 = s.k1 * H, t1 = d1 * H;
     for (int j = 1; j < m; ++j) {
-        const double t = double(j) / double(m), t2 = t * t, t3 = t2 * t;
-        const double h00 = 2 * t3 - 3 * t2 + 1, h10 = t3 - 2 * t2 + t, h01 = 3 * t2 - 2 * t3, h11 = t3 - t2;
+        double hc[4];
+        const double* hj = hc;
+        if (m <= HermiteTable::kMaxStride) hj = kHermite.h[m][j];
+        else hermiteBasis(j, m, hc);
+        const double h00 = hj[0], h10 = hj[1], h01 = hj[2], h11 = hj[3];
         openvdb::Vec3d p; // h00 x + h10 t0 + h01 x1 + h11 t1, summed left to right
         for (int a = 0; a < 3; ++a) p[a] = h00 * s.x[a] + h10 * t0[a] + h01 * x1[a] + h11 * t1[a];
         if (!on(p)) return false;
