@@ -78,6 +78,10 @@ void report(benchmark::State& state, const lic::LicStats& stats)
     state.counters["samples/voxel"] = stats.samplesPerVoxel();
     state.counters["streamlines"] = double(stats.streamlines);
     state.counters["bricks"] = double(stats.bricks);
+    if (stats.speculated > 0) {
+        state.counters["speculated"] = double(stats.speculated);
+        state.counters["dropped"] = double(stats.dropped);
+    }
     state.counters["Mvoxels/s"] =
         benchmark::Counter(double(stats.voxels) * double(state.iterations()) / 1e6, benchmark::Counter::kIsRate);
 }

@@ -179,6 +179,73 @@ TEST(Bricks, ManyBricksAreBitIdenticalForOneToFourThreads)
     }
 }
 
+TEST(Bricks, FastSpeculationGivesTheSequentialLines)
+{
+    // The fast engine traces the next seed's line ahead while a line has one side left, and
+    // drops it or cuts it back once the line has deposited. Against tracing each seed's line in
+    // turn: the same bits and the same counts, for both kernels, ripple sums, strides 1, 2 and
+    // automatic (4), min_hits 1 to 3, short covered runs (more lone sides), spots with halos and
+    // comet loops; and the speculation did run (and, somewhere, had to drop a line).
+    struct Restore
+    {
+        ~Restore() { detail::fastSpeculation = true; }
+    } restore;
+    VelocityField field(lictest::abcField(20));
+    OutputDomain domain(field, 2);
+    const NoiseTexture noise(3, domain.indexBBox());
+    SpotSet spots;
+    spots.centers = placeSpots({SpotDistribution::Poisson, 5.0, 0.25, 3},
+                               openvdb::BBoxd(domain.indexBBox().min().asVec3d(), domain.indexBBox().max().asVec3d()));
+    spots.weights.assign(spots.centers.size(), 1.0f);
+    struct Case
+    {
+        const char* name;
+        void (*set)(LicSettings&);
+        bool spots;
+    };
+    const Case cases[] = {
+        {"box", [](LicSettings&) {}, false},
+        {"exp", [](LicSettings& s) { s.kernel = KernelType::Exp; }, false},
+        {"ripple", [](LicSettings& s) { s.ripple = true; }, false},
+        {"stride 1", [](LicSettings& s) { s.stride = 1; }, false},
+        {"stride 2", [](LicSettings& s) { s.stride = 2; }, false},
+        {"min_hits 1", [](LicSettings& s) { s.minHits = 1; }, false},
+        {"min_hits 3, covered run 4", [](LicSettings& s) { s.minHits = 3, s.coveredRun = 4; }, false},
+        {"length 20, covered run 8", [](LicSettings& s) { s.length = 20, s.coveredRun = 8; }, false},
+        {"spots", [](LicSettings&) {}, true},
+        {"spot comets", [](LicSettings& s) { s.comets = 6; }, true},
+    };
+    std::uint64_t dropped = 0;
+    for (const Case& c : cases) {
+        LicSettings s;
+        s.length = 8;
+        s.brick = 16;
+        s.threads = 2;
+        c.set(s);
+        auto run = [&](bool speculate) {
+            detail::fastSpeculation = speculate;
+            return c.spots ? convolveSpots(field, domain, spots, {1.0, 2.0}, 2.0, s) : convolve(field, domain, noise, s);
+        };
+        const LicResult seq = run(false), spec = run(true);
+        EXPECT_EQ(seq.stats.speculated, 0u) << c.name;
+        EXPECT_GT(spec.stats.speculated, spec.stats.streamlines / 10) << c.name;
+        EXPECT_LT(spec.stats.dropped, spec.stats.speculated) << c.name;
+        dropped += spec.stats.dropped;
+        EXPECT_EQ(spec.stats.streamlines, seq.stats.streamlines) << c.name;
+        EXPECT_EQ(spec.stats.samples, seq.stats.samples) << c.name;
+        EXPECT_EQ(spec.stats.deposits, seq.stats.deposits) << c.name;
+        ASSERT_EQ(spec.channels.size(), seq.channels.size()) << c.name;
+        for (std::size_t k = 0; k < seq.channels.size(); ++k)
+            EXPECT_TRUE(sameBits(spec.channels[k], seq.channels[k])) << c.name << ", channel " << k;
+    }
+    EXPECT_GT(dropped, 0u);
+    // RK45 traces each side alone in world space: no speculation.
+    LicSettings s;
+    s.length = 8;
+    s.integrator = Integrator::RK45;
+    EXPECT_EQ(convolve(field, domain, noise, s).stats.speculated, 0u);
+}
+
 TEST(Bricks, NoSeamAtBrickFaces)
 {
     // Against the naive reference, voxels next to a brick face are no worse than voxels inside a

@@ -29,9 +29,11 @@
 #include <openvdb/math/Vec3.h>
 
 #include <algorithm>
+#include <atomic>
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <stdexcept>
 #include <vector>
 
 namespace lic {
@@ -41,6 +43,10 @@ namespace detail {
 /// Deposit weight 1/(1 + k|δ|²)², δ = voxel centre − sample (output voxels): 1 at the centre,
 /// 0.08 half a voxel away (close to exp(−|δ|²/0.1), without the exp).
 constexpr double kDepositFalloff = 10.0;
+
+/// Whether the fast engine traces the next line ahead beside a line's last side (FastLines::
+/// traceBrick). The output is the same bits either way; tests turn it off to show that.
+inline std::atomic<bool> fastSpeculation{true};
 
 /// Per-thread buffers of the fast engine, reused from brick to brick and line to line: no
 /// allocation in the hot path once they have grown.
@@ -55,8 +61,10 @@ struct FastScratch
     // The line's samples in place: output-index position and local voxel (−1 = not ours) per
     // sample, the seed at the middle, upstream written downwards from it and downstream upwards,
     // so the line is one run of memory without assembling.
-    std::vector<openvdb::Vec3d> idx;
-    std::vector<std::int64_t> loc;
+    // Two lines' buffers: the line being finished and the next one, traced speculatively beside
+    // it (FastLines::traceBrick).
+    std::vector<openvdb::Vec3d> idx[2];
+    std::vector<std::int64_t> loc[2];
     std::vector<double> vals, win, norm, scratch; // samples, window sums, kernel weights
     std::vector<double> moved, movedWin, subNorm; // comet loops: moved texture, its window sums
 };
@@ -79,10 +87,16 @@ public:
 
     /// Trace the line through the voxel `ijk` (local index `seedLocal`) and deposit along it.
     void traceAndDeposit(std::int64_t seedLocal, const openvdb::Coord& ijk);
+    /// Every line of the brick: `nextSeed(local, ijk)` gives the next voxel in scan order with
+    /// fewer than min_hits deposits (false when there is none). The same lines and deposits as
+    /// traceAndDeposit() called for each seed in turn; with RK4, while a line has one side left
+    /// the next seed's line is traced beside it speculatively (see the comment in the definition).
+    template<typename NextSeed>
+    void traceBrick(NextSeed&& nextSeed);
     /// Output channels per voxel: K, or frames · C for a comet loop.
     int channels() const { return mFrames > 0 ? mFrames * C : K; }
 
-    std::uint64_t samples = 0, deposits = 0, streamlines = 0;
+    std::uint64_t samples = 0, deposits = 0, streamlines = 0, speculated = 0, dropped = 0;
 
 private:
     /// Per-sample bookkeeping of one side: output-index position and local voxel; decides when
@@ -95,8 +109,33 @@ private:
         std::ptrdiff_t count = 0; ///< samples recorded
         int run = 0, tail = -1;
     };
+    /// Local index recorded for a sample outside the brick's box (−1: inside but not ours).
+    static constexpr std::int64_t kOutside = -2;
     /// Record a sample at field index `p`; false stops the side.
     bool onSample(Side& st, const openvdb::Vec3d& p);
+    /// onSample for the tracer: a side's callback.
+    struct SideSink
+    {
+        FastLines* lines;
+        Side* side;
+        bool operator()(const openvdb::Vec3d& p) const { return lines->onSample(*side, p); }
+    };
+    /// A line in flight: its two sides' tracer states and sample records, in buffer `buf`.
+    struct Line
+    {
+        detail::IndexSide tb, tf;
+        Side back{nullptr, nullptr, -1}, fwd{nullptr, nullptr, 1};
+        std::int64_t seed = -1;
+        bool live() const { return tb.alive || tf.alive; }
+    };
+    /// Start `ln` at the seed voxel, its samples in buffer `buf`.
+    void startLine(Line& ln, int buf, std::int64_t seedLocal, const openvdb::Coord& ijk);
+    /// The traced line's windows and deposits (both sides have ended).
+    void finishLine(const Side& back, const Side& fwd, StopReason whyB, StopReason whyF);
+    /// A speculative side's stop rule run again over its recorded samples with the deposits as
+    /// they are now: the side is cut where onSample would have stopped it, or carries on from the
+    /// state onSample would have reached.
+    void replay(Side& st, detail::IndexSide& t);
     /// The texture (and ripple products) at every sample, then the window sums.
     void convolveLine(std::size_t N);
     /// Deposit the window averages of samples lo … hi into their voxels.
@@ -185,16 +224,25 @@ void FastEngine::brick(const VelocityField& field, const OutputDomain& domain, c
 
     // Seeds: every active voxel of the brick in scan order that has fewer than min_hits deposits
     // when the scan reaches it.
-    for (std::uint32_t b : brick.blocks) {
-        const openvdb::Coord& origin = domain.blockOrigin(b);
-        const std::size_t base = bi.localBlock(origin) * V;
-        for (auto on = domain.blockMask(b).beginOn(); on; ++on) {
-            const std::size_t off = on.pos();
-            if (sc.hits[base + off] >= std::uint8_t(settings.minHits)) continue;
-            const openvdb::Coord ijk = origin + openvdb::Coord(int(off >> 6), int((off >> 3) & 7), int(off & 7));
-            lines.traceAndDeposit(std::int64_t(base + off), ijk);
+    std::size_t bi0 = 0; // the scan: block brick.blocks[bi0], its active voxels from `scanOn`
+    auto scanOn = brick.blocks.empty() ? OutputDomain::Mask::OnIterator() : domain.blockMask(brick.blocks[0]).beginOn();
+    lines.traceBrick([&](std::int64_t& local, openvdb::Coord& ijk) {
+        for (; bi0 < brick.blocks.size(); ++bi0) {
+            const std::uint32_t b = brick.blocks[bi0];
+            const openvdb::Coord& origin = domain.blockOrigin(b);
+            const std::size_t base = bi.localBlock(origin) * V;
+            for (; scanOn; ++scanOn) {
+                const std::size_t off = scanOn.pos();
+                if (sc.hits[base + off] >= std::uint8_t(settings.minHits)) continue;
+                ijk = origin + openvdb::Coord(int(off >> 6), int((off >> 3) & 7), int(off & 7));
+                local = std::int64_t(base + off);
+                ++scanOn;
+                return true;
+            }
+            if (bi0 + 1 < brick.blocks.size()) scanOn = domain.blockMask(brick.blocks[bi0 + 1]).beginOn();
         }
-    }
+        return false;
+    });
 
     // Normalise into the brick's output blocks: every value of every block is written (0 where no
     // line deposited or the voxel is inactive), so the buffer is not cleared first; it only grows
@@ -222,6 +270,8 @@ void FastEngine::brick(const VelocityField& field, const OutputDomain& domain, c
     stats.samples += lines.samples;
     stats.deposits += lines.deposits;
     stats.streamlines += lines.streamlines;
+    stats.speculated += lines.speculated;
+    stats.dropped += lines.dropped;
 }
 
 namespace detail {
@@ -281,12 +331,13 @@ bool FastLines<Texture, Ripple>::onSample(Side& st, const openvdb::Vec3d& p)
     // Output index q of field index p: output voxel j has its centre at field index (j + ½)/K − ½.
     const openvdb::Vec3d q(p[0] * mUp + mUpOff, p[1] * mUp + mUpOff, p[2] * mUp + mUpOff);
     const openvdb::Coord ijk = OutputDomain::nearestVoxel(q);
-    const std::int64_t l = sc.index.localOf(ijk);
+    std::int64_t l = sc.index.localOf(ijk);
+    if (l < 0 && !sc.index.inside(ijk)) l = kOutside;
     ++st.count;
     st.idx[st.dir * st.count] = q;
     st.loc[st.dir * st.count] = l;
     if (st.tail >= 0) return --st.tail > 0;
-    if (l < 0 && !sc.index.inside(ijk)) {
+    if (l == kOutside) {
         // Left the brick: trace on only to complete the windows of the samples inside.
         st.tail = mTail - 1;
         return st.tail > 0;
@@ -297,27 +348,172 @@ bool FastLines<Texture, Ripple>::onSample(Side& st, const openvdb::Vec3d& p)
 }
 
 template<typename Texture, bool Ripple>
+void FastLines<Texture, Ripple>::replay(Side& st, detail::IndexSide& t)
+{
+    // onSample's decisions again, from the recorded local indices and today's hits.
+    int run = 0, tail = -1;
+    for (std::ptrdiff_t k = 1; k <= st.count; ++k) {
+        const std::int64_t l = st.loc[st.dir * k];
+        bool more = true;
+        if (tail >= 0) {
+            more = --tail > 0;
+        } else if (l == kOutside) {
+            tail = mTail - 1;
+            more = tail > 0;
+        } else {
+            run = (l < 0 || sc.hits[std::size_t(l)] >= mMinHits) ? run + 1 : 0;
+            if (run >= mSettings.coveredRun) tail = mTail;
+        }
+        if (!more) {
+            st.count = k;
+            st.run = run;
+            st.tail = tail;
+            t.alive = false;
+            t.why = StopReason::Caller;
+            return;
+        }
+    }
+    // Deposits only ever add hits, so the rule stops a side no later than it did before them.
+    if (!t.alive && t.why == StopReason::Caller)
+        throw std::logic_error("fast engine: a speculative line's replay ran past where it stopped");
+    st.run = run;
+    st.tail = tail;
+}
+
+template<typename Texture, bool Ripple>
+void FastLines<Texture, Ripple>::startLine(Line& ln, int buf, std::int64_t seedLocal, const openvdb::Coord& ijk)
+{
+    // Each side records at most maxSamples samples (the tracer stops it there).
+    const std::size_t M = std::size_t(mTrace.maxSamples);
+    if (sc.idx[buf].size() < 2 * M + 1) {
+        sc.idx[buf].resize(2 * M + 1);
+        sc.loc[buf].resize(2 * M + 1);
+    }
+    openvdb::Vec3d* mid = sc.idx[buf].data() + M;
+    std::int64_t* midLoc = sc.loc[buf].data() + M;
+    *mid = ijk.asVec3d();
+    *midLoc = seedLocal;
+    ln.back = Side{mid, midLoc, -1};
+    ln.fwd = Side{mid, midLoc, +1};
+    ln.seed = seedLocal;
+    const openvdb::Vec3d seedIdx((ijk[0] - mUpOff) / mUp, (ijk[1] - mUpOff) / mUp, (ijk[2] - mUpOff) / mUp);
+    ln.tb = detail::IndexSide{};
+    ln.tf = detail::IndexSide{};
+    ln.tb.sign = -1.0;
+    ln.tf.sign = +1.0;
+    ln.tb.x = ln.tf.x = seedIdx;
+    for (detail::IndexSide* t : {&ln.tb, &ln.tf})
+        if (!mField.directionIndex(seedIdx, t->sign, mTrace.minSpeed, t->k1)) {
+            t->alive = false;
+            t->why = StopReason::Boundary;
+        }
+}
+
+template<typename Texture, bool Ripple>
 void FastLines<Texture, Ripple>::traceAndDeposit(std::int64_t seedLocal, const openvdb::Coord& ijk)
 {
     const openvdb::Vec3d seedIdx((ijk[0] - mUpOff) / mUp, (ijk[1] - mUpOff) / mUp, (ijk[2] - mUpOff) / mUp);
-    // Each side records at most maxSamples samples (traceIndexPair stops it there).
-    const std::size_t M = std::size_t(mTrace.maxSamples);
-    if (sc.idx.size() < 2 * M + 1) {
-        sc.idx.resize(2 * M + 1);
-        sc.loc.resize(2 * M + 1);
-    }
-    openvdb::Vec3d* mid = sc.idx.data() + M;
-    std::int64_t* midLoc = sc.loc.data() + M;
-    *mid = ijk.asVec3d();
-    *midLoc = seedLocal;
-    Side back{mid, midLoc, -1}, fwd{mid, midLoc, +1};
+    Line ln;
+    startLine(ln, 0, seedLocal, ijk);
     const auto [whyB, whyF] = traceIndexPair(
-        mField, seedIdx, mTrace, mStride, sc.pts, [&](const openvdb::Vec3d& p) { return onSample(back, p); },
-        [&](const openvdb::Vec3d& p) { return onSample(fwd, p); });
+        mField, seedIdx, mTrace, mStride, sc.pts, [&](const openvdb::Vec3d& p) { return onSample(ln.back, p); },
+        [&](const openvdb::Vec3d& p) { return onSample(ln.fwd, p); });
+    finishLine(ln.back, ln.fwd, whyB, whyF);
+}
+
+// Speculation. While a line has one side left (a lone side: its other side stopped in covered
+// voxels), the next seed in scan order is taken with the hits as they are before this line's
+// deposits, and its line is traced beside the lone side, their RK4 stages interleaved
+// (stepLongLanes) so the CPU overlaps their latency chains. When the first line has deposited:
+// if the next seed is now covered, the sequential scan would have skipped it, so its line is
+// dropped and the scan goes on after it; otherwise the sequential scan would have picked it
+// (the voxels between were covered before and hits only grow), its trace is the same (tracing
+// does not read hits), and only where its sides stop can differ: the stop rule is replayed on its
+// recorded samples with the new hits (replay()), cutting each side where onSample would have
+// stopped it. So the lines, their samples and their deposits are exactly the sequential ones.
+template<typename Texture, bool Ripple>
+template<typename NextSeed>
+void FastLines<Texture, Ripple>::traceBrick(NextSeed&& nextSeed)
+{
+    std::int64_t local = 0;
+    openvdb::Coord ijk;
+    if (mTrace.integrator != Integrator::RK4 || !fastSpeculation.load(std::memory_order_relaxed)) {
+        while (nextSeed(local, ijk)) traceAndDeposit(local, ijk);
+        return;
+    }
+    using detail::IndexSide;
+    Line lines[2];
+    int cur = -1, spec = -1; // indices into lines (and buffers); −1: none
+    bool seedsLeft = true;
+    const int stride = std::max(1, mStride);
+    for (;;) {
+        if (cur < 0) {
+            if (!seedsLeft || !nextSeed(local, ijk)) break;
+            cur = 0;
+            startLine(lines[cur], cur, local, ijk);
+        }
+        Line& c = lines[cur];
+        if (spec < 0 && seedsLeft && c.tb.alive != c.tf.alive) {
+            if (nextSeed(local, ijk)) {
+                spec = 1 - cur;
+                startLine(lines[spec], spec, local, ijk);
+                ++speculated;
+            } else {
+                seedsLeft = false;
+            }
+        }
+        // One step of every live side: the long steps together, the rest one by one.
+        IndexSide* lanes[4];
+        SideSink sinks[4];
+        const SideSink* sinkPtrs[4];
+        int n = 0;
+        for (int li : {cur, spec}) {
+            if (li < 0) continue;
+            Line& ln = lines[li];
+            for (int side = 0; side < 2; ++side) {
+                IndexSide& t = side == 0 ? ln.tb : ln.tf;
+                if (!t.alive) continue;
+                SideSink sink{this, side == 0 ? &ln.back : &ln.fwd};
+                if (detail::takesLongStep(t, mTrace, stride)) {
+                    lanes[n] = &t;
+                    sinks[n] = sink;
+                    ++n;
+                } else {
+                    detail::advanceSide(mField, t, mTrace, stride, sink);
+                }
+            }
+        }
+        for (int i = 0; i < n; ++i) sinkPtrs[i] = &sinks[i];
+        switch (n) {
+        case 1: detail::advanceSide(mField, *lanes[0], mTrace, stride, sinks[0]); break;
+        case 2: detail::stepLongLanes<2>(mField, lanes, sinkPtrs, mTrace, stride); break;
+        case 3: detail::stepLongLanes<3>(mField, lanes, sinkPtrs, mTrace, stride); break;
+        case 4: detail::stepLongLanes<4>(mField, lanes, sinkPtrs, mTrace, stride); break;
+        default: break;
+        }
+        if (c.live()) continue;
+        finishLine(c.back, c.fwd, c.tb.why, c.tf.why);
+        cur = -1;
+        if (spec < 0) continue;
+        Line& sp = lines[spec];
+        if (sc.hits[std::size_t(sp.seed)] < mMinHits) {
+            replay(sp.back, sp.tb);
+            replay(sp.fwd, sp.tf);
+            cur = spec;
+        } else {
+            ++dropped;
+        }
+        spec = -1;
+    }
+}
+
+template<typename Texture, bool Ripple>
+void FastLines<Texture, Ripple>::finishLine(const Side& back, const Side& fwd, StopReason whyB, StopReason whyF)
+{
     auto natural = [](StopReason why) { return why == StopReason::Boundary || why == StopReason::ZeroVelocity; };
     const std::size_t B = std::size_t(back.count), N = B + 1 + std::size_t(fwd.count);
-    mIdx = mid - back.count;
-    mLoc = midLoc - back.count;
+    mIdx = back.idx - back.count;
+    mLoc = back.loc - back.count;
     // Samples whose window runs past an artificial end (length limit, early stop, brick exit)
     // are not deposited; near a natural end the window is truncated exactly as in the naive
     // engine. The exp kernel only looks downstream, so the upstream end never cuts a window;

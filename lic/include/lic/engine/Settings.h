@@ -90,16 +90,20 @@ struct LicStats
     std::uint64_t streamlines = 0; ///< streamlines traced (both directions count as one)
     std::uint64_t samples = 0;     ///< integration samples taken (seed points included)
     std::uint64_t deposits = 0;    ///< fast and splat: values deposited into voxels
+    std::uint64_t speculated = 0;  ///< fast: lines traced ahead, beside a line's last side
+    std::uint64_t dropped = 0;     ///< fast: of those, lines dropped (their seed got covered)
     std::uint64_t bricks = 0;      ///< bricks convolved
     int brickDim = 0;              ///< brick edge, output voxels
     double seconds = 0.0;          ///< wall-clock time of the convolution
 
-    /// Add another worker's or brick's counters (streamlines, samples, deposits).
+    /// Add another worker's or brick's counters (streamlines, samples, deposits, speculation).
     LicStats& operator+=(const LicStats& o)
     {
         streamlines += o.streamlines;
         samples += o.samples;
         deposits += o.deposits;
+        speculated += o.speculated;
+        dropped += o.dropped;
         return *this;
     }
     double samplesPerVoxel() const { return voxels ? double(samples) / double(voxels) : 0.0; }

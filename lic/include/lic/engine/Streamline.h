@@ -7,6 +7,7 @@
 
 #include <openvdb/math/Vec3.h>
 
+#include <algorithm>
 #include <span>
 #include <string>
 #include <vector>
@@ -236,6 +237,57 @@ void advanceSide(const VelocityField& f, IndexSide& s, const TraceSettings& ts, 
     if (s.done < ts.maxSamples && !f.directionIndex(s.x, s.sign, ts.minSpeed, s.k1)) {
         s.alive = false;
         s.why = StopReason::Boundary;
+    }
+}
+
+/// True when side `s` takes its next step as a long step (not single mode, more than one sample
+/// of room before maxSamples): what stepLongLanes() advances.
+inline bool takesLongStep(const IndexSide& s, const TraceSettings& ts, int stride)
+{
+    return s.alive && !s.single && s.done < ts.maxSamples && std::min(stride, ts.maxSamples - s.done) > 1;
+}
+
+/// Advance N sides, each takesLongStep(), by one long step each, with their RK4 stages
+/// interleaved so the CPU overlaps the N latency chains (traceIndexPair's paired loop, for sides
+/// of any lines). Each side's arithmetic is advanceSide()'s long step: the same positions. A side
+/// whose long step fails turns single (its next advanceSide() steps singly), one its callback
+/// stops ends (Caller), one that reaches maxSamples ends (Length).
+template<int N, typename OnSample>
+void stepLongLanes(const VelocityField& f, IndexSide* const* S, OnSample* const* on, const TraceSettings& ts,
+                   int stride)
+{
+    using openvdb::Vec3d;
+    Vec3d k2[N], k3[N], k4[N], k1n[N], x1[N];
+    bool ok[N];
+    double H[N];
+    int m[N];
+    for (int i = 0; i < N; ++i) {
+        m[i] = std::min(stride, ts.maxSamples - S[i]->done);
+        H[i] = ts.step * double(m[i]);
+    }
+    for (int i = 0; i < N; ++i)
+        ok[i] = f.directionIndex(stepAlong(S[i]->x, S[i]->k1, 0.5 * H[i]), S[i]->sign, ts.minSpeed, k2[i]);
+    for (int i = 0; i < N; ++i)
+        ok[i] = ok[i] && f.directionIndex(stepAlong(S[i]->x, k2[i], 0.5 * H[i]), S[i]->sign, ts.minSpeed, k3[i]);
+    for (int i = 0; i < N; ++i)
+        ok[i] = ok[i] && f.directionIndex(stepAlong(S[i]->x, k3[i], H[i]), S[i]->sign, ts.minSpeed, k4[i]);
+    for (int i = 0; i < N; ++i)
+        if (ok[i]) x1[i] = rk4Update(S[i]->x, S[i]->k1, k2[i], k3[i], k4[i], H[i] / 6.0);
+    for (int i = 0; i < N; ++i)
+        ok[i] = ok[i] && f.containsIndex(x1[i]) && f.directionIndex(x1[i], S[i]->sign, ts.minSpeed, k1n[i]);
+    for (int i = 0; i < N; ++i) {
+        IndexSide& s = *S[i];
+        if (!ok[i]) {
+            s.single = true;
+            continue;
+        }
+        if (!emitLongStep(s, m[i], H[i], x1[i], k1n[i], *on[i])) {
+            s.alive = false;
+            s.why = StopReason::Caller;
+        } else if (s.done >= ts.maxSamples) {
+            s.alive = false;
+            s.why = StopReason::Length;
+        }
     }
 }
 } // namespace detail
