@@ -61,10 +61,11 @@ struct FastScratch
     // The line's samples in place: output-index position and local voxel (−1 = not ours) per
     // sample, the seed at the middle, upstream written downwards from it and downstream upwards,
     // so the line is one run of memory without assembling.
-    // Two lines' buffers: the line being finished and the next one, traced speculatively beside
-    // it (FastLines::traceBrick).
-    std::vector<openvdb::Vec3d> idx[2];
-    std::vector<std::int64_t> loc[2];
+    // The buffers of the lines in flight: the line being finished and the next ones, traced
+    // speculatively beside it (FastLines::traceBrick).
+    static constexpr int kLines = 3;
+    std::vector<openvdb::Vec3d> idx[kLines];
+    std::vector<std::int64_t> loc[kLines];
     std::vector<double> vals, win, norm, scratch; // samples, window sums, kernel weights
     std::vector<double> moved, movedWin, subNorm; // comet loops: moved texture, its window sums
 };
@@ -120,6 +121,7 @@ private:
         Side* side;
         bool operator()(const openvdb::Vec3d& p) const { return lines->onSample(*side, p); }
     };
+    static constexpr int kLines = FastScratch::kLines; ///< lines in flight at most
     /// A line in flight: its two sides' tracer states and sample records, in buffer `buf`.
     struct Line
     {
@@ -442,34 +444,42 @@ void FastLines<Texture, Ripple>::traceBrick(NextSeed&& nextSeed)
         return;
     }
     using detail::IndexSide;
-    Line lines[2];
-    int cur = -1, spec = -1; // indices into lines (and buffers); −1: none
+    // q[0] is the line being finished: every earlier line has deposited. q[1 …] are speculative,
+    // in scan order. Each has its own buffer (sc.idx[b], sc.loc[b]).
+    Line lines[kLines];
+    int q[kLines];
+    int qn = 0;
     bool seedsLeft = true;
     const int stride = std::max(1, mStride);
+    auto push = [&] {
+        int b = 0;
+        while (std::find(q, q + qn, b) != q + qn) ++b;
+        startLine(lines[b], b, local, ijk);
+        q[qn++] = b;
+    };
+    auto pop = [&] { std::copy(q + 1, q + qn--, q); };
     for (;;) {
-        if (cur < 0) {
+        if (qn == 0) {
             if (!seedsLeft || !nextSeed(local, ijk)) break;
-            cur = 0;
-            startLine(lines[cur], cur, local, ijk);
+            push();
         }
-        Line& c = lines[cur];
-        if (spec < 0 && seedsLeft && c.tb.alive != c.tf.alive) {
+        int live = 0;
+        for (int i = 0; i < qn; ++i) live += int(lines[q[i]].tb.alive) + int(lines[q[i]].tf.alive);
+        if (live == 1 && qn < kLines && seedsLeft) {
             if (nextSeed(local, ijk)) {
-                spec = 1 - cur;
-                startLine(lines[spec], spec, local, ijk);
+                push();
                 ++speculated;
             } else {
                 seedsLeft = false;
             }
         }
         // One step of every live side: the long steps together, the rest one by one.
-        IndexSide* lanes[4];
-        SideSink sinks[4];
-        const SideSink* sinkPtrs[4];
+        IndexSide* lanes[2 * kLines];
+        SideSink sinks[2 * kLines];
+        const SideSink* sinkPtrs[2 * kLines];
         int n = 0;
-        for (int li : {cur, spec}) {
-            if (li < 0) continue;
-            Line& ln = lines[li];
+        for (int i = 0; i < qn; ++i) {
+            Line& ln = lines[q[i]];
             for (int side = 0; side < 2; ++side) {
                 IndexSide& t = side == 0 ? ln.tb : ln.tf;
                 if (!t.alive) continue;
@@ -485,25 +495,36 @@ void FastLines<Texture, Ripple>::traceBrick(NextSeed&& nextSeed)
         }
         for (int i = 0; i < n; ++i) sinkPtrs[i] = &sinks[i];
         switch (n) {
+        case 0: break;
         case 1: detail::advanceSide(mField, *lanes[0], mTrace, stride, sinks[0]); break;
         case 2: detail::stepLongLanes<2>(mField, lanes, sinkPtrs, mTrace, stride); break;
         case 3: detail::stepLongLanes<3>(mField, lanes, sinkPtrs, mTrace, stride); break;
-        case 4: detail::stepLongLanes<4>(mField, lanes, sinkPtrs, mTrace, stride); break;
-        default: break;
+        default: // four or more: in threes and the rest
+            for (int i = 0; i < n; i += 3) {
+                const int m = std::min(3, n - i);
+                if (m == 3) detail::stepLongLanes<3>(mField, lanes + i, sinkPtrs + i, mTrace, stride);
+                else if (m == 2) detail::stepLongLanes<2>(mField, lanes + i, sinkPtrs + i, mTrace, stride);
+                else detail::advanceSide(mField, *lanes[i], mTrace, stride, sinks[i]);
+            }
+            break;
         }
-        if (c.live()) continue;
-        finishLine(c.back, c.fwd, c.tb.why, c.tf.why);
-        cur = -1;
-        if (spec < 0) continue;
-        Line& sp = lines[spec];
-        if (sc.hits[std::size_t(sp.seed)] < mMinHits) {
-            replay(sp.back, sp.tb);
-            replay(sp.fwd, sp.tf);
-            cur = spec;
-        } else {
-            ++dropped;
+        // Finish the lines at the front that have ended; each line behind one becomes the front
+        // once it has deposited: dropped if its seed is now covered, else its stop rule replayed.
+        while (qn > 0 && !lines[q[0]].live()) {
+            const Line& f = lines[q[0]];
+            finishLine(f.back, f.fwd, f.tb.why, f.tf.why);
+            pop();
+            while (qn > 0) {
+                Line& next = lines[q[0]];
+                if (sc.hits[std::size_t(next.seed)] < mMinHits) {
+                    replay(next.back, next.tb);
+                    replay(next.fwd, next.tf);
+                    break;
+                }
+                ++dropped;
+                pop();
+            }
         }
-        spec = -1;
     }
 }
 
