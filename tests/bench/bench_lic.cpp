@@ -106,11 +106,11 @@ void bake(benchmark::State& state, lic::EngineType engine, double length, int br
         lic::NoiseBrickSource noise(1, lic::NoiseFilter::Binomial, lic::ghostMargin(settings));
         double checksum = 0;
         std::mutex m;
-        stats = lic::convolveBricks(s.field, s.domain, layout, noise, settings, lic::nullProgress(),
-                                    [&](const lic::BrickChannels& b) {
-                                        const std::lock_guard lock(m);
-                                        checksum += double(b.values[0]);
-                                    });
+        stats = lic::convolveNoiseBricks({s.field, s.domain, layout, settings, lic::nullProgress()}, noise,
+                                         [&](const lic::BrickChannels& b) {
+                                             const std::lock_guard lock(m);
+                                             checksum += double(b.values[0]);
+                                         });
         benchmark::DoNotOptimize(checksum);
     }
     report(state, stats);

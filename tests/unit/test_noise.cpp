@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 
 using namespace lic;
 using openvdb::Coord;
@@ -66,4 +67,34 @@ TEST(Noise, TrilinearBetweenCentresWithGradient)
     t.sampleGradient(openvdb::Vec3d(1.25, 2, 3), &v, g);
     EXPECT_NEAR(g[0], whiteNoise(9, 2, 2, 3) - whiteNoise(9, 1, 2, 3), 1e-6);
     EXPECT_THROW(noiseFilterFromString("gauss"), Error);
+}
+
+TEST(Noise, ABricksNoiseClippedToTheReachSamplesTheSame)
+{
+    // A brick at a corner of the reach (the field's output voxels, as gatherNoiseBricks clips):
+    // the clipped texture is smaller than the brick grown by its margin, and every lookup inside
+    // the reach, up to half a voxel past its outermost centres, gives the same value and gradient
+    // bits as the unclipped texture.
+    const CoordBBox reach(Coord(0), Coord(47));
+    Brick brick;
+    brick.box = CoordBBox(Coord(0), Coord(15));
+    NoiseBrickSource whole(4, NoiseFilter::Binomial, 20), clipped(4, NoiseFilter::Binomial, 20);
+    clipped.clipTo(reach.expandBy(1));
+    const NoiseTexture& a = whole(brick);
+    const NoiseTexture& b = clipped(brick);
+    EXPECT_EQ(a.box(), CoordBBox(Coord(-20), Coord(35)));
+    EXPECT_EQ(b.box(), CoordBBox(Coord(-1), Coord(35)));
+    std::uint32_t state = 12345;
+    auto uniform = [&](double lo, double hi) {
+        state = state * 1664525u + 1013904223u;
+        return lo + (hi - lo) * double(state >> 8) / double(1u << 24);
+    };
+    for (int s = 0; s < 20000; ++s) {
+        openvdb::Vec3d p(uniform(-0.5, 47.5), uniform(-0.5, 47.5), uniform(-0.5, 47.5));
+        if (s % 4 == 0) p[s % 3] = (s / 4) % 2 ? 47.5 : -0.5; // on the reach's faces
+        float va[4], vb[4];
+        a.sampleGradient(p, va, va + 1);
+        b.sampleGradient(p, vb, vb + 1);
+        for (int c = 0; c < 4; ++c) ASSERT_EQ(std::memcmp(&va[c], &vb[c], sizeof(float)), 0) << p << " component " << c;
+    }
 }

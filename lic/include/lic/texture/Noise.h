@@ -191,11 +191,19 @@ public:
         : mSeed(seed), mFilter(filter), mMargin(margin), mPremask(std::move(premask)), mRaw(std::move(raw))
     {
     }
-    /// The noise over `brick.box` grown by the margin; the same brick asked for twice in a row on
-    /// one thread is made once.
+    /// Make each brick's noise only where a lookup can land: `reach` (output voxels) holds every
+    /// voxel a streamline's samples can interpolate between (the field's extent). A brick by the
+    /// domain's edge then skips the part of its margin outside the field (at length 40 on a 128³
+    /// volume the margin is most of the texture). The values are the same: a voxel's noise does not
+    /// depend on the box, and no lookup inside the reach is clamped differently.
+    void clipTo(const openvdb::CoordBBox& reach) { mReach = reach; }
+
+    /// The noise over `brick.box` grown by the margin (within the reach, if clipped); the same
+    /// brick asked for twice in a row on one thread is made once.
     const NoiseTexture& operator()(const Brick& brick)
     {
-        const openvdb::CoordBBox box = brick.box.expandBy(mMargin);
+        openvdb::CoordBBox box = brick.box.expandBy(mMargin);
+        if (!mReach.empty()) box.intersect(mReach);
         NoiseTexture& t = mTls.local();
         if (t.built() && t.box() == box) return t;
         t.assign(mSeed, box, mFilter, false, mRaw ? &mRaw : nullptr);
@@ -209,6 +217,7 @@ private:
     int mMargin;
     Premask mPremask;
     NoiseTexture::RawNoise mRaw;
+    openvdb::CoordBBox mReach; // empty: no clip
     tbb::enumerable_thread_specific<NoiseTexture> mTls;
 };
 
