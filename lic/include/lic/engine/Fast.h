@@ -426,7 +426,7 @@ void FastLines<Texture, Ripple>::traceAndDeposit(std::int64_t seedLocal, const o
 // Speculation. While a line has one side left (a lone side: its other side stopped in covered
 // voxels), the next seed in scan order is taken with the hits as they are before this line's
 // deposits, and its line is traced beside the lone side, their RK4 stages interleaved
-// (stepLongLanes) so the CPU overlaps their latency chains. When the first line has deposited:
+// (stepLanes) so the CPU overlaps their latency chains. When the first line has deposited:
 // if the next seed is now covered, the sequential scan would have skipped it, so its line is
 // dropped and the scan goes on after it; otherwise the sequential scan would have picked it
 // (the voxels between were covered before and hits only grow), its trace is the same (tracing
@@ -473,7 +473,7 @@ void FastLines<Texture, Ripple>::traceBrick(NextSeed&& nextSeed)
                 seedsLeft = false;
             }
         }
-        // One step of every live side: the long steps together, the rest one by one.
+        // One step of every live side, their RK4 stages interleaved.
         IndexSide* lanes[2 * kLines];
         SideSink sinks[2 * kLines];
         const SideSink* sinkPtrs[2 * kLines];
@@ -484,29 +484,22 @@ void FastLines<Texture, Ripple>::traceBrick(NextSeed&& nextSeed)
                 IndexSide& t = side == 0 ? ln.tb : ln.tf;
                 if (!t.alive) continue;
                 SideSink sink{this, side == 0 ? &ln.back : &ln.fwd};
-                if (detail::takesLongStep(t, mTrace, stride)) {
+                if (detail::takesStep(t, mTrace)) {
                     lanes[n] = &t;
                     sinks[n] = sink;
                     ++n;
                 } else {
-                    detail::advanceSide(mField, t, mTrace, stride, sink);
+                    detail::advanceSide(mField, t, mTrace, stride, sink); // ends it (Length)
                 }
             }
         }
         for (int i = 0; i < n; ++i) sinkPtrs[i] = &sinks[i];
-        switch (n) {
-        case 0: break;
-        case 1: detail::advanceSide(mField, *lanes[0], mTrace, stride, sinks[0]); break;
-        case 2: detail::stepLongLanes<2>(mField, lanes, sinkPtrs, mTrace, stride); break;
-        case 3: detail::stepLongLanes<3>(mField, lanes, sinkPtrs, mTrace, stride); break;
-        default: // four or more: in threes and the rest
-            for (int i = 0; i < n; i += 3) {
-                const int m = std::min(3, n - i);
-                if (m == 3) detail::stepLongLanes<3>(mField, lanes + i, sinkPtrs + i, mTrace, stride);
-                else if (m == 2) detail::stepLongLanes<2>(mField, lanes + i, sinkPtrs + i, mTrace, stride);
-                else detail::advanceSide(mField, *lanes[i], mTrace, stride, sinks[i]);
+        for (int i = 0; i < n; i += 3) { // in threes and the rest
+            switch (std::min(3, n - i)) {
+            case 3: detail::stepLanes<3>(mField, lanes + i, sinkPtrs + i, mTrace, stride); break;
+            case 2: detail::stepLanes<2>(mField, lanes + i, sinkPtrs + i, mTrace, stride); break;
+            default: detail::advanceSide(mField, *lanes[i], mTrace, stride, sinks[i]); break;
             }
-            break;
         }
         // Finish the lines at the front that have ended; each line behind one becomes the front
         // once it has deposited: dropped if its seed is now covered, else its stop rule replayed.

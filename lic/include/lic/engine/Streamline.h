@@ -240,30 +240,29 @@ void advanceSide(const VelocityField& f, IndexSide& s, const TraceSettings& ts, 
     }
 }
 
-/// True when side `s` takes its next step as a long step (not single mode, more than one sample
-/// of room before maxSamples): what stepLongLanes() advances.
-inline bool takesLongStep(const IndexSide& s, const TraceSettings& ts, int stride)
-{
-    return s.alive && !s.single && s.done < ts.maxSamples && std::min(stride, ts.maxSamples - s.done) > 1;
-}
+/// True when side `s` has a step to take (alive, below maxSamples): what stepLanes() advances.
+inline bool takesStep(const IndexSide& s, const TraceSettings& ts) { return s.alive && s.done < ts.maxSamples; }
 
-/// Advance N sides, each takesLongStep(), by one long step each, with their RK4 stages
-/// interleaved so the CPU overlaps the N latency chains (traceIndexPair's paired loop, for sides
-/// of any lines). Each side's arithmetic is advanceSide()'s long step: the same positions. A side
-/// whose long step fails turns single (its next advanceSide() steps singly), one its callback
-/// stops ends (Caller), one that reaches maxSamples ends (Length).
+/// Advance N sides, each takesStep(), by one step each, with their RK4 stages interleaved so the
+/// CPU overlaps the N latency chains (traceIndexPair's paired loop, for sides of any lines). Each
+/// side's step and arithmetic are advanceSide()'s: a long step of `stride` samples, or a single
+/// step of h in single mode or with one sample of room left; so the same positions and ends. A
+/// side whose long step fails turns single (its next step is single), one its callback stops
+/// ends (Caller), one that reaches maxSamples ends (Length), a single step that leaves the domain
+/// or meets zero speed ends the side (Boundary).
 template<int N, typename OnSample>
-void stepLongLanes(const VelocityField& f, IndexSide* const* S, OnSample* const* on, const TraceSettings& ts,
-                   int stride)
+void stepLanes(const VelocityField& f, IndexSide* const* S, OnSample* const* on, const TraceSettings& ts, int stride)
 {
     using openvdb::Vec3d;
     Vec3d k2[N], k3[N], k4[N], k1n[N], x1[N];
-    bool ok[N];
+    bool ok[N], dirOk[N], single[N];
     double H[N];
     int m[N];
     for (int i = 0; i < N; ++i) {
         m[i] = std::min(stride, ts.maxSamples - S[i]->done);
-        H[i] = ts.step * double(m[i]);
+        single[i] = S[i]->single || m[i] <= 1;
+        if (single[i]) m[i] = 1;
+        H[i] = single[i] ? ts.step : ts.step * double(m[i]);
     }
     for (int i = 0; i < N; ++i)
         ok[i] = f.directionIndex(stepAlong(S[i]->x, S[i]->k1, 0.5 * H[i]), S[i]->sign, ts.minSpeed, k2[i]);
@@ -273,20 +272,45 @@ void stepLongLanes(const VelocityField& f, IndexSide* const* S, OnSample* const*
         ok[i] = ok[i] && f.directionIndex(stepAlong(S[i]->x, k3[i], H[i]), S[i]->sign, ts.minSpeed, k4[i]);
     for (int i = 0; i < N; ++i)
         if (ok[i]) x1[i] = rk4Update(S[i]->x, S[i]->k1, k2[i], k3[i], k4[i], H[i] / 6.0);
-    for (int i = 0; i < N; ++i)
-        ok[i] = ok[i] && f.containsIndex(x1[i]) && f.directionIndex(x1[i], S[i]->sign, ts.minSpeed, k1n[i]);
+    for (int i = 0; i < N; ++i) {
+        ok[i] = ok[i] && f.containsIndex(x1[i]);
+        // A single step's last sample needs no direction (advanceSide does not take it).
+        dirOk[i] = ok[i] && (single[i] && S[i]->done + 1 >= ts.maxSamples
+                                 ? true
+                                 : f.directionIndex(x1[i], S[i]->sign, ts.minSpeed, k1n[i]));
+    }
     for (int i = 0; i < N; ++i) {
         IndexSide& s = *S[i];
-        if (!ok[i]) {
-            s.single = true;
+        if (!single[i]) {
+            if (!dirOk[i]) {
+                s.single = true;
+            } else if (!emitLongStep(s, m[i], H[i], x1[i], k1n[i], *on[i])) {
+                s.alive = false;
+                s.why = StopReason::Caller;
+            } else if (s.done >= ts.maxSamples) {
+                s.alive = false;
+                s.why = StopReason::Length;
+            }
             continue;
         }
-        if (!emitLongStep(s, m[i], H[i], x1[i], k1n[i], *on[i])) {
+        if (!ok[i]) {
+            s.alive = false;
+            s.why = StopReason::Boundary;
+        } else if (!(*on[i])(x1[i])) {
             s.alive = false;
             s.why = StopReason::Caller;
-        } else if (s.done >= ts.maxSamples) {
-            s.alive = false;
-            s.why = StopReason::Length;
+        } else {
+            s.x = x1[i];
+            ++s.done;
+            if (s.done >= ts.maxSamples) {
+                s.alive = false;
+                s.why = StopReason::Length;
+            } else if (!dirOk[i]) {
+                s.alive = false;
+                s.why = StopReason::Boundary;
+            } else {
+                s.k1 = k1n[i];
+            }
         }
     }
 }
