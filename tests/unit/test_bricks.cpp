@@ -54,6 +54,16 @@ struct AbcBricks
     BrickLayout layout{domain, 16};
 };
 
+/// Poisson spots 5 voxels apart over the whole output box, weight 1.
+SpotSet poissonSpots(const OutputDomain& domain)
+{
+    SpotSet spots;
+    spots.centers = placeSpots({SpotDistribution::Poisson, 5.0, 0.25, 3},
+                               openvdb::BBoxd(domain.indexBBox().min().asVec3d(), domain.indexBBox().max().asVec3d()));
+    spots.weights.assign(spots.centers.size(), 1.0f);
+    return spots;
+}
+
 template<typename A>
 bool sameBits(const std::vector<float, A>& a, const std::vector<float>& b)
 {
@@ -139,10 +149,7 @@ TEST(Bricks, ManyBricksAreBitIdenticalForOneToFourThreads)
     const tbb::global_control allow(tbb::global_control::max_allowed_parallelism, 4);
     VelocityField field(lictest::abcField(24));
     OutputDomain domain(field, 2);
-    SpotSet spots;
-    spots.centers = placeSpots({SpotDistribution::Poisson, 5.0, 0.25, 3},
-                               openvdb::BBoxd(domain.indexBBox().min().asVec3d(), domain.indexBBox().max().asVec3d()));
-    spots.weights.assign(spots.centers.size(), 1.0f);
+    const SpotSet spots = poissonSpots(domain);
     struct Case
     {
         const char* name;
@@ -193,10 +200,7 @@ TEST(Bricks, FastSpeculationGivesTheSequentialLines)
     VelocityField field(lictest::abcField(20));
     OutputDomain domain(field, 2);
     const NoiseTexture noise(3, domain.indexBBox());
-    SpotSet spots;
-    spots.centers = placeSpots({SpotDistribution::Poisson, 5.0, 0.25, 3},
-                               openvdb::BBoxd(domain.indexBBox().min().asVec3d(), domain.indexBBox().max().asVec3d()));
-    spots.weights.assign(spots.centers.size(), 1.0f);
+    const SpotSet spots = poissonSpots(domain);
     struct Case
     {
         const char* name;
