@@ -11,11 +11,7 @@ LicStats gatherNoiseBricks(const ConvolveJob& job, NoiseBrickSource& noise, cons
     // [K·min − ½, K·(max + 1) − ½] (output voxel j's centre is at field index (j + ½)/K − ½): their
     // lookups read voxels K·min − 1 … K·(max + 1), which a texture over the field's output voxels
     // holds (NoiseTexture keeps one voxel around its box). One more voxel to spare.
-    const openvdb::CoordBBox& fb = job.field.indexBBox();
-    const int K = job.domain.upsample();
-    const openvdb::Coord lo(fb.min()[0] * K, fb.min()[1] * K, fb.min()[2] * K);
-    const openvdb::Coord hi(fb.max()[0] * K + K - 1, fb.max()[1] * K + K - 1, fb.max()[2] * K + K - 1);
-    noise.clipTo(openvdb::CoordBBox(lo, hi).expandBy(1));
+    noise.clipTo(OutputDomain::outputBox(job.field.indexBBox(), job.domain.upsample()).expandBy(1));
     return gatherBricks<Engine>(job.field, job.domain, job.layout, noise, job.settings, job.progress, sink);
 }
 

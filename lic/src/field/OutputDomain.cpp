@@ -57,9 +57,7 @@ void OutputDomain::init(const openvdb::math::Transform& fieldTransform, const op
     const openvdb::Vec3d vs = mTransform->voxelSize();
     mVoxelSize = std::min({vs[0], vs[1], vs[2]});
 
-    mBBox = openvdb::CoordBBox(
-        openvdb::Coord(fb.min()[0] * K, fb.min()[1] * K, fb.min()[2] * K),
-        openvdb::Coord(fb.max()[0] * K + K - 1, fb.max()[1] * K + K - 1, fb.max()[2] * K + K - 1));
+    mBBox = outputBox(fb, K);
     const openvdb::Coord dim = mBBox.dim();
     const double total = double(dim[0]) * dim[1] * dim[2];
     if (total > double(1ull << 31)) {

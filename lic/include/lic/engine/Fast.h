@@ -130,6 +130,11 @@ private:
         std::int64_t seed = -1;
         bool live() const { return tb.alive || tf.alive; }
     };
+    /// Field index position of an output voxel's centre (output voxel j: field index (j + ½)/K − ½).
+    openvdb::Vec3d seedIndex(const openvdb::Coord& ijk) const
+    {
+        return openvdb::Vec3d((ijk[0] - mUpOff) / mUp, (ijk[1] - mUpOff) / mUp, (ijk[2] - mUpOff) / mUp);
+    }
     /// Start `ln` at the seed voxel, its samples in buffer `buf`.
     void startLine(Line& ln, int buf, std::int64_t seedLocal, const openvdb::Coord& ijk);
     /// The traced line's windows and deposits (both sides have ended).
@@ -398,27 +403,18 @@ void FastLines<Texture, Ripple>::startLine(Line& ln, int buf, std::int64_t seedL
     ln.back = Side{mid, midLoc, -1};
     ln.fwd = Side{mid, midLoc, +1};
     ln.seed = seedLocal;
-    const openvdb::Vec3d seedIdx((ijk[0] - mUpOff) / mUp, (ijk[1] - mUpOff) / mUp, (ijk[2] - mUpOff) / mUp);
-    ln.tb = detail::IndexSide{};
-    ln.tf = detail::IndexSide{};
-    ln.tb.sign = -1.0;
-    ln.tf.sign = +1.0;
-    ln.tb.x = ln.tf.x = seedIdx;
-    for (detail::IndexSide* t : {&ln.tb, &ln.tf})
-        if (!mField.directionIndex(seedIdx, t->sign, mTrace.minSpeed, t->k1)) {
-            t->alive = false;
-            t->why = StopReason::Boundary;
-        }
+    const openvdb::Vec3d seedIdx = seedIndex(ijk);
+    ln.tb = detail::startSide(mField, seedIdx, -1.0, mTrace.minSpeed);
+    ln.tf = detail::startSide(mField, seedIdx, +1.0, mTrace.minSpeed);
 }
 
 template<typename Texture, bool Ripple>
 void FastLines<Texture, Ripple>::traceAndDeposit(std::int64_t seedLocal, const openvdb::Coord& ijk)
 {
-    const openvdb::Vec3d seedIdx((ijk[0] - mUpOff) / mUp, (ijk[1] - mUpOff) / mUp, (ijk[2] - mUpOff) / mUp);
     Line ln;
     startLine(ln, 0, seedLocal, ijk);
     const auto [whyB, whyF] = traceIndexPair(
-        mField, seedIdx, mTrace, mStride, sc.pts, [&](const openvdb::Vec3d& p) { return onSample(ln.back, p); },
+        mField, seedIndex(ijk), mTrace, mStride, sc.pts, [&](const openvdb::Vec3d& p) { return onSample(ln.back, p); },
         [&](const openvdb::Vec3d& p) { return onSample(ln.fwd, p); });
     finishLine(ln.back, ln.fwd, whyB, whyF);
 }
@@ -474,33 +470,16 @@ void FastLines<Texture, Ripple>::traceBrick(NextSeed&& nextSeed)
             }
         }
         // One step of every live side, their RK4 stages interleaved.
-        IndexSide* lanes[2 * kLines];
+        IndexSide* sides[2 * kLines];
         SideSink sinks[2 * kLines];
-        const SideSink* sinkPtrs[2 * kLines];
+        SideSink* sinkPtrs[2 * kLines];
         int n = 0;
         for (int i = 0; i < qn; ++i) {
             Line& ln = lines[q[i]];
-            for (int side = 0; side < 2; ++side) {
-                IndexSide& t = side == 0 ? ln.tb : ln.tf;
-                if (!t.alive) continue;
-                SideSink sink{this, side == 0 ? &ln.back : &ln.fwd};
-                if (detail::takesStep(t, mTrace)) {
-                    lanes[n] = &t;
-                    sinks[n] = sink;
-                    ++n;
-                } else {
-                    detail::advanceSide(mField, t, mTrace, stride, sink); // ends it (Length)
-                }
-            }
+            sides[n] = &ln.tb, sinks[n] = SideSink{this, &ln.back}, sinkPtrs[n] = &sinks[n], ++n;
+            sides[n] = &ln.tf, sinks[n] = SideSink{this, &ln.fwd}, sinkPtrs[n] = &sinks[n], ++n;
         }
-        for (int i = 0; i < n; ++i) sinkPtrs[i] = &sinks[i];
-        for (int i = 0; i < n; i += 3) { // in threes and the rest
-            switch (std::min(3, n - i)) {
-            case 3: detail::stepLanes<3>(mField, lanes + i, sinkPtrs + i, mTrace, stride); break;
-            case 2: detail::stepLanes<2>(mField, lanes + i, sinkPtrs + i, mTrace, stride); break;
-            default: detail::advanceSide(mField, *lanes[i], mTrace, stride, sinks[i]); break;
-            }
-        }
+        detail::stepSides(mField, sides, sinkPtrs, n, mTrace, stride);
         // Finish the lines at the front that have ended; each line behind one becomes the front
         // once it has deposited: dropped if its seed is now covered, else its stop rule replayed.
         while (qn > 0 && !lines[q[0]].live()) {

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <span>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace lic {
@@ -244,7 +245,7 @@ void advanceSide(const VelocityField& f, IndexSide& s, const TraceSettings& ts, 
 inline bool takesStep(const IndexSide& s, const TraceSettings& ts) { return s.alive && s.done < ts.maxSamples; }
 
 /// Advance N sides, each takesStep(), by one step each, with their RK4 stages interleaved so the
-/// CPU overlaps the N latency chains (traceIndexPair's paired loop, for sides of any lines). Each
+/// CPU overlaps the N latency chains (sides of one line or of several; see stepSides()). Each
 /// side's step and arithmetic are advanceSide()'s: a long step of `stride` samples, or a single
 /// step of h in single mode or with one sample of room left; so the same positions and ends. A
 /// side whose long step fails turns single (its next step is single), one its callback stops
@@ -314,6 +315,48 @@ void stepLanes(const VelocityField& f, IndexSide* const* S, OnSample* const* on,
         }
     }
 }
+
+/// A side starting at `seedIdx` in direction `sign` (dead, Boundary, where the seed has no
+/// direction).
+inline IndexSide startSide(const VelocityField& f, const openvdb::Vec3d& seedIdx, double sign, double minSpeed)
+{
+    IndexSide t;
+    t.sign = sign;
+    t.x = seedIdx;
+    if (!f.directionIndex(seedIdx, sign, minSpeed, t.k1)) {
+        t.alive = false;
+        t.why = StopReason::Boundary;
+    }
+    return t;
+}
+
+/// One step of each live side among `n` (callbacks `on[i]`): the ones with a step to take in
+/// lanes of three (stepLanes), the rest by advanceSide(), which ends them (Length).
+template<typename OnSample>
+void stepSides(const VelocityField& f, IndexSide* const* sides, OnSample* const* on, int n, const TraceSettings& ts,
+               int stride)
+{
+    constexpr int kMax = 8;
+    IndexSide* lanes[kMax];
+    OnSample* laneOn[kMax];
+    int k = 0;
+    for (int i = 0; i < n; ++i) {
+        if (!sides[i]->alive) continue;
+        if (takesStep(*sides[i], ts)) {
+            lanes[k] = sides[i];
+            laneOn[k++] = on[i];
+        } else {
+            advanceSide(f, *sides[i], ts, stride, *on[i]);
+        }
+    }
+    for (int i = 0; i < k; i += 3) {
+        switch (std::min(3, k - i)) {
+        case 3: stepLanes<3>(f, lanes + i, laneOn + i, ts, stride); break;
+        case 2: stepLanes<2>(f, lanes + i, laneOn + i, ts, stride); break;
+        default: advanceSide(f, *lanes[i], ts, stride, *laneOn[i]); break;
+        }
+    }
+}
 } // namespace detail
 
 /// The fast engine's tracer: both sides of the streamline through `seedIdx` (upstream to `onBack`,
@@ -341,52 +384,21 @@ std::pair<StopReason, StopReason> traceIndexPair(const VelocityField& f, const o
         const StopReason b = traceStreamline(f, w, +1.0, s, scratch, [&](const Vec3d& p) { return onFwd(f.map().toIndex(p)); });
         return {a, b};
     }
-    detail::IndexSide A, B;
-    A.sign = -1.0;
-    B.sign = +1.0;
-    A.x = B.x = seedIdx;
-    if (!f.directionIndex(seedIdx, -1.0, s.minSpeed, A.k1)) {
-        A.alive = false;
-        A.why = StopReason::Boundary;
-    }
-    if (!f.directionIndex(seedIdx, +1.0, s.minSpeed, B.k1)) {
-        B.alive = false;
-        B.why = StopReason::Boundary;
-    }
+    // Both sides stepped together (their RK4 stages interleaved), each with its own callback.
+    struct Sink
+    {
+        std::remove_reference_t<OnBack>* back;
+        std::remove_reference_t<OnFwd>* fwd;
+        bool upstream;
+        bool operator()(const Vec3d& p) const { return upstream ? (*back)(p) : (*fwd)(p); }
+    };
+    detail::IndexSide A = detail::startSide(f, seedIdx, -1.0, s.minSpeed);
+    detail::IndexSide B = detail::startSide(f, seedIdx, +1.0, s.minSpeed);
+    Sink sinkA{&onBack, &onFwd, true}, sinkB{&onBack, &onFwd, false};
+    detail::IndexSide* const sides[2] = {&A, &B};
+    Sink* const sinks[2] = {&sinkA, &sinkB};
     stride = std::max(1, stride);
-    const double h = s.step;
-    while (A.alive && B.alive) {
-        const int ma = std::min(stride, s.maxSamples - A.done), mb = std::min(stride, s.maxSamples - B.done);
-        if (A.single || B.single || ma <= 1 || mb <= 1) break;
-        // Both sides take a long step, stage by stage.
-        const double Ha = h * double(ma), Hb = h * double(mb);
-        Vec3d a2(0.0), a3(0.0), a4(0.0), b2(0.0), b3(0.0), b4(0.0), a1n(0.0), b1n(0.0), xa(0.0), xb(0.0);
-        using detail::stepAlong;
-        bool okA = f.directionIndex(stepAlong(A.x, A.k1, 0.5 * Ha), A.sign, s.minSpeed, a2);
-        bool okB = f.directionIndex(stepAlong(B.x, B.k1, 0.5 * Hb), B.sign, s.minSpeed, b2);
-        okA = okA && f.directionIndex(stepAlong(A.x, a2, 0.5 * Ha), A.sign, s.minSpeed, a3);
-        okB = okB && f.directionIndex(stepAlong(B.x, b2, 0.5 * Hb), B.sign, s.minSpeed, b3);
-        okA = okA && f.directionIndex(stepAlong(A.x, a3, Ha), A.sign, s.minSpeed, a4);
-        okB = okB && f.directionIndex(stepAlong(B.x, b3, Hb), B.sign, s.minSpeed, b4);
-        if (okA) xa = detail::rk4Update(A.x, A.k1, a2, a3, a4, Ha / 6.0);
-        if (okB) xb = detail::rk4Update(B.x, B.k1, b2, b3, b4, Hb / 6.0);
-        okA = okA && f.containsIndex(xa) && f.directionIndex(xa, A.sign, s.minSpeed, a1n);
-        okB = okB && f.containsIndex(xb) && f.directionIndex(xb, B.sign, s.minSpeed, b1n);
-        if (okA) {
-            if (!detail::emitLongStep(A, ma, Ha, xa, a1n, onBack)) A.alive = false, A.why = StopReason::Caller;
-        } else {
-            A.single = true;
-        }
-        if (okB) {
-            if (!detail::emitLongStep(B, mb, Hb, xb, b1n, onFwd)) B.alive = false, B.why = StopReason::Caller;
-        } else {
-            B.single = true;
-        }
-        if (A.alive && A.done >= s.maxSamples) A.alive = false, A.why = StopReason::Length;
-        if (B.alive && B.done >= s.maxSamples) B.alive = false, B.why = StopReason::Length;
-    }
-    while (A.alive) detail::advanceSide(f, A, s, stride, onBack);
-    while (B.alive) detail::advanceSide(f, B, s, stride, onFwd);
+    while (A.alive || B.alive) detail::stepSides(f, sides, sinks, 2, s, stride);
     return {A.why, B.why};
 }
 

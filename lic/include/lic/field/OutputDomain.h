@@ -45,6 +45,16 @@ public:
     double voxelSize() const { return mVoxelSize; }
     /// Bounding box of all output voxels, inclusive.
     const openvdb::CoordBBox& indexBBox() const { return mBBox; }
+    /// The output voxels of a field's index box at `upsample` K: field voxel i holds output voxels
+    /// K·i … K·i + K − 1 along each axis.
+    static openvdb::CoordBBox outputBox(const openvdb::CoordBBox& fieldBox, int upsample)
+    {
+        const int K = upsample;
+        const openvdb::Coord& lo = fieldBox.min();
+        const openvdb::Coord& hi = fieldBox.max();
+        return openvdb::CoordBBox(openvdb::Coord(lo[0] * K, lo[1] * K, lo[2] * K),
+                                  openvdb::Coord(hi[0] * K + K - 1, hi[1] * K + K - 1, hi[2] * K + K - 1));
+    }
 
     std::size_t blockCount() const { return mBlockOrigins.size(); }
     const openvdb::Coord& blockOrigin(std::size_t b) const { return mBlockOrigins[b]; }
