@@ -50,12 +50,22 @@ public:
     double tauMax() const { return mTauMax; }
     /// Add a·W(τ, d) for every part to out[0 .. parts). No-op outside the support.
     void add(double tau, double d, float a, float* out) const;
+    /// Start loading the table rows add(tau, d, …) will read (a hint; no effect on results).
+    void prefetch(double tau, double d) const;
     /// The same sum worked out directly over window samples i0 … i1 only (a window cut by a wall),
     /// normalised by `weight`, the kernel weight of those samples: for spots within reach of a
     /// wall, where the part of the spot beyond the wall must not count.
     void addDirect(double tau, double d, float a, int i0, int i1, double weight, float* out) const;
 
 private:
+    /// The table entry at the lower corner of (τ, d)'s cell and the bilinear fractions; c00 null
+    /// outside the support.
+    struct Cell
+    {
+        const float* c00 = nullptr;
+        float wt = 0, wd = 0;
+    };
+    Cell cell(double tau, double d) const;
     /// 1/step if step is a power of two (then x·(1/step) is x/step exactly), else 0.
     static double exactInverse(double step);
 
