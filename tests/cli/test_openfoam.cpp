@@ -10,6 +10,7 @@
 // Without OpenFOAM (make_cases.sh exits 77) every test FAILS with "NOT RUN: OpenFOAM not installed"
 // unless LICVDB_ALLOW_NO_OPENFOAM=1, which makes them skip with that text.
 #include "CellFit.h"
+#include "FoamCases.h"
 #include "InputsHarness.h"
 
 #include <nlohmann/json.hpp>
@@ -27,40 +28,9 @@
 
 using namespace inputs_test;
 using namespace mesh_test;
+using namespace foam_test;
 
 namespace {
-
-constexpr const char* kNotRun = "NOT RUN: OpenFOAM not installed (apt-get install openfoam openfoam-examples)";
-
-fs::path foamCache()
-{
-    const char* env = std::getenv("LICVDB_FOAM_CACHE");
-    return env && *env ? fs::path(env) : fs::path("/var/cache/licvdb/openfoam");
-}
-
-/// make_cases.sh's exit status and output, run once per test process.
-struct Cases
-{
-    int code = -1;
-    std::string log;
-};
-
-const Cases& cases()
-{
-    static const Cases c = [] {
-        Cases r;
-        const fs::path log = fs::temp_directory_path() / ("licvdb_make_cases_" + std::to_string(::getpid()) + ".log");
-        const std::string cmd = "bash " + shellQuote(std::string(LICVDB_SOURCE_DIR) + "/tests/openfoam/make_cases.sh") + " "
-                                + shellQuote(foamCache().string()) + " >" + shellQuote(log.string()) + " 2>&1";
-        const int status = std::system(cmd.c_str());
-        r.code = status == -1 ? -1 : WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-        r.log = readText(log);
-        std::error_code ec;
-        fs::remove(log, ec);
-        return r;
-    }();
-    return c;
-}
 
 /// The .vdb's velocity grid.
 openvdb::Vec3SGrid::Ptr readVelocity(const fs::path& p)
@@ -121,9 +91,8 @@ protected:
         InputsTest::SetUp();
         const Cases& c = cases();
         if (c.code == 77) {
-            const char* allow = std::getenv("LICVDB_ALLOW_NO_OPENFOAM");
-            if (allow && std::string(allow) == "1") GTEST_SKIP() << kNotRun;
-            FAIL() << kNotRun << " (set LICVDB_ALLOW_NO_OPENFOAM=1 to skip instead)\n" << c.log;
+            if (allowNoOpenFoam()) GTEST_SKIP() << kNotRun;
+            FAIL() << kNotRun << kAllowNoOpenFoam << "\n" << c.log;
         }
         ASSERT_EQ(c.code, 0) << "tests/openfoam/make_cases.sh " << foamCache() << " failed:\n" << c.log;
     }
