@@ -657,6 +657,10 @@ public:
           mSy(std::size_t(impl.nx)), mSz(std::size_t(impl.nx) * std::size_t(impl.ny)),
           mDensityTable(impl.densityLeaves.blocks()), mHaloTable(Halo ? impl.haloLeaves.blocks() : nullptr)
     {
+        // Loaded by the first emitting sample (mEmitCell starts on no cell); zeroed so that the
+        // compiler can see they are never read unset.
+        std::fill(std::begin(mCol), std::end(mCol), openvdb::Vec3s(0.0f));
+        std::fill(std::begin(mUnit), std::end(mUnit), openvdb::Vec3s(0.0f));
     }
 
     /// Take the sample at parameter `t`; false once the ray is opaque (finished).

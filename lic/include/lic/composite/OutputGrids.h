@@ -50,12 +50,12 @@ struct OutputGridRow
     std::string_view name;      ///< grid name; a per-level grid's name is this + k (1-based)
     std::string_view type;      ///< "float" or "vec3s"
     GridWhen when;
-    std::string_view recipeKey; ///< Asked: the key under `output` ("write_tangent"), else ""
-    std::string_view flag;      ///< Asked: the bake flag ("--write-tangent"), else ""
-    std::string_view help;      ///< Asked: the flag's help (rows sharing a flag: the first row's)
-    std::string_view fill;      ///< what each active voxel holds
-    std::string_view metadata;  ///< the grid's own metadata, as the docs describe it ("" = none)
-    std::string_view blender;   ///< what the Blender add-on does with it
+    std::string_view recipeKey = {}; ///< Asked: the key under `output` ("write_tangent"), else ""
+    std::string_view flag = {};      ///< Asked: the bake flag ("--write-tangent"), else ""
+    std::string_view help = {};      ///< Asked: the flag's help (rows sharing a flag: the first row's)
+    std::string_view fill = {};      ///< what each active voxel holds
+    std::string_view metadata = {};  ///< the grid's own metadata, as the docs describe it ("" = none)
+    std::string_view blender = {};   ///< what the Blender add-on does with it
     bool perLevel = false;      ///< one grid per spot width level (`density_w1`, `density_w2`, ...)
     bool perFrame = false;      ///< composed for every frame of a loop; else shared by every frame
     /// Vector grids: how OpenVDB transforms the values (velocity: contravariant relative).
