@@ -15,6 +15,7 @@
 #include <lic/util/Error.h>
 
 #include <openvdb/openvdb.h>
+#include <tbb/parallel_for.h>
 
 #include <chrono>
 #include <filesystem>
@@ -636,6 +637,49 @@ TEST_F(VdbIOTest, SealedLeavesAreWrittenAsTheWholeLeavesWouldBe)
     const auto mixed = sealGrid(velocity, 1, true);
     EXPECT_THROW(vdbexport::detail::writeVdbFile(file("mixed.vdb"), {mixed}, meta, vdbexport::detail::kWriteHoldBytes, &sealer),
                  lic::Error);
+}
+
+// A loop's sealed records go to a spool file in the output directory, each thread gathering a
+// grid's records and writing them when its buffer fills (or at flush()). Sealed on several
+// threads, grids interleaved leaf by leaf as a brick seals them, with enough leaves that the
+// buffers fill and spill many times: the file must be whole leaves' byte for byte, and reading
+// the records before flush() is a programming error, not a file with holes.
+TEST_F(VdbIOTest, SpooledSealedLeavesAreWrittenAsTheWholeLeavesWouldBe)
+{
+    auto density = noisyGrid<openvdb::FloatGrid>("density", 2000, false, 21);
+    auto halo = noisyGrid<openvdb::FloatGrid>("halo", 2000, false, 22);
+    vdbexport::detail::SealedLeaves sealer(/*half=*/false, mDir.string());
+    sealer.begin({"density", "halo"});
+    std::vector<const openvdb::FloatTree::LeafNodeType*> a, b;
+    for (auto it = density->constTree().cbeginLeaf(); it; ++it) a.push_back(it.getLeaf());
+    for (auto it = halo->constTree().cbeginLeaf(); it; ++it) b.push_back(it.getLeaf());
+    ASSERT_EQ(a.size(), b.size());
+    std::vector<std::uint32_t> tagA(a.size()), tagB(b.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, a.size(), 8), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            tagA[i] = sealer.seal(0, *a[i]);
+            tagB[i] = sealer.seal(1, *b[i]);
+        }
+    });
+    auto topology = [](const openvdb::FloatGrid& grid, const auto& leaves, const std::vector<std::uint32_t>& tags) {
+        auto out = openvdb::gridPtrCast<openvdb::FloatGrid>(grid.copyGridWithNewTree());
+        for (std::size_t i = 0; i < leaves.size(); ++i) out->tree().addLeaf(lic::topologyOnly(*leaves[i], tags[i]).release());
+        return out;
+    };
+    const auto sealedDensity = topology(*density, a, tagA), sealedHalo = topology(*halo, b, tagB);
+    const std::string ref = file("whole.vdb"), ours = file("spooled.vdb");
+    EXPECT_THROW(vdbexport::detail::writeVdbFile(ours, {sealedDensity, sealedHalo}, {}, vdbexport::detail::kWriteHoldBytes,
+                                                 &sealer),
+                 std::logic_error);
+    sealer.flush();
+    vdbexport::detail::writeVdbFile(ref, {density, halo}, {});
+    vdbexport::detail::writeVdbFile(ours, {sealedDensity, sealedHalo}, {}, vdbexport::detail::kWriteHoldBytes, &sealer);
+    const std::string x = fileBytes(ours), y = fileBytes(ref);
+    constexpr std::size_t kUuid = 21, kUuidEnd = 21 + 36;
+    ASSERT_EQ(x.size(), y.size());
+    EXPECT_GT(x.size(), std::size_t(6) << 20) << "too few leaves to fill the spool's buffers";
+    EXPECT_EQ(x.substr(0, kUuid), y.substr(0, kUuid));
+    EXPECT_TRUE(x.substr(kUuidEnd) == y.substr(kUuidEnd)) << "spooled and whole leaves give different files";
 }
 
 // Names Archive would change (a repeated name) take io::File::write's path: still a readable

@@ -186,6 +186,7 @@ nlohmann::json bake(const Recipe& request, lic::Progress& progress)
     pipeline::FrameOptions frameOptions;
     frameOptions.sealer = sealer ? &*sealer : nullptr;
     FrameBake fb(plan, job, progress, std::move(frameOptions));
+    if (fb.sealed) sealer->flush(); // every leaf is sealed: a loop's last spooled records to disk
     const detail::SealedLeaves* sealed = fb.sealed ? &*sealer : nullptr;
 
     // Metadata, files, manifest.

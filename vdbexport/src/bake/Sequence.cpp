@@ -428,6 +428,7 @@ void bakeFrame(SequenceState& seq, int k, FrameProgress& progress)
     desc.densityMeta.insertMeta("licvdb_field_file", openvdb::StringMetadata(fs::path(fr.field.path).filename().string()));
     progress.begin("writing", 1);
     openvdb::GridPtrVec grids;
+    if (fb.sealed) sealer->flush();
     stageGathered(seq, fb, fr, desc.densityMeta, number, grids, fb.sealed ? &*sealer : nullptr);
     progress.advance(1);
     progress.end();

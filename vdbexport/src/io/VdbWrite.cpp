@@ -38,7 +38,9 @@
 #include <fstream>
 #include <limits>
 #include <set>
+#include <span>
 #include <sstream>
+#include <stdexcept>
 #include <tuple>
 #include <type_traits>
 #include <utility>
@@ -347,15 +349,23 @@ private:
                             const SealedLeaves& records, std::ostream& os)
     {
         // Gathered into runs of ~4 MiB: a file stream writes small records through its 8 KiB
-        // buffer, a system call each time it fills.
+        // buffer, a system call each time it fills (and spooled records that lie together are
+        // read back together).
         std::string run;
         run.reserve(kRunBytes + 65536);
+        std::vector<const LeafRecord*> batch;
+        std::size_t batchBytes = 0;
         const std::size_t n = leaves.leafCount();
         for (std::size_t i = 0; i < n && os; ++i) {
-            records.appendBytes(leaves.sealed(i, sealed), run);
-            if (run.size() >= kRunBytes || i + 1 == n) {
+            const LeafRecord& r = leaves.sealed(i, sealed);
+            batch.push_back(&r);
+            batchBytes += std::max<std::size_t>(r.length, r.bytes.size()); // spooled: length; held: bytes
+            if (batchBytes >= kRunBytes || i + 1 == n) {
+                records.appendBytes(batch, run);
                 os.write(run.data(), std::streamsize(run.size()));
                 run.clear();
+                batch.clear();
+                batchBytes = 0;
             }
         }
     }
@@ -422,21 +432,75 @@ SealedLeaves::~SealedLeaves()
     if (mSpool >= 0) ::close(mSpool);
 }
 
-void SealedLeaves::appendBytes(const LeafRecord& r, std::string& out) const
+void SealedLeaves::writeSpool(const Pending& p) const
 {
-    if (mSpool < 0) {
-        out += r.bytes;
-        return;
+    for (std::size_t done = 0; done < p.bytes.size();) {
+        const ssize_t n = ::pwrite(mSpool, p.bytes.data() + done, p.bytes.size() - done, off_t(p.base + done));
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0)
+            throw lic::Error("cannot spool the compressed leaves of a loop to " + mSpoolDir + " ("
+                             + (n < 0 ? std::strerror(errno) : "nothing written") + "; disk full?)");
+        done += std::size_t(n);
     }
-    const std::size_t at = out.size();
-    out.resize(at + r.length);
-    for (std::size_t done = 0; done < r.length;) {
-        const ssize_t n = ::pread(mSpool, out.data() + at + done, r.length - done, off_t(r.spoolAt + done));
+}
+
+void SealedLeaves::readSpool(std::uint64_t at, std::size_t length, std::string& out) const
+{
+    const std::size_t start = out.size();
+    out.resize(start + length);
+    for (std::size_t done = 0; done < length;) {
+        const ssize_t n = ::pread(mSpool, out.data() + start + done, length - done, off_t(at + done));
         if (n < 0 && errno == EINTR) continue;
         if (n <= 0)
             throw lic::Error("cannot read back the spooled leaves of a loop in " + mSpoolDir + " ("
                              + (n < 0 ? std::strerror(errno) : "the spool file is short") + ")");
         done += std::size_t(n);
+    }
+}
+
+std::uint64_t SealedLeaves::spool(int grid, std::string_view bytes)
+{
+    // Written where a fetch_add reserved room: any thread, no lock. A thread fills a Pending per
+    // grid, so a grid's leaves sealed one after another by a thread lie one after another in the
+    // spool and are read back together.
+    if (mFlushed.load(std::memory_order_relaxed)) mFlushed.store(false, std::memory_order_relaxed);
+    Pending& p = mPending.local()[std::size_t(grid)];
+    if (p.bytes.size() + bytes.size() > p.capacity) {
+        writeSpool(p);
+        p.bytes.clear();
+        p.capacity = std::max(mPendingBytes, bytes.size());
+        p.base = mSpoolEnd.fetch_add(p.capacity);
+    }
+    const std::uint64_t at = p.base + p.bytes.size();
+    p.bytes.append(bytes);
+    return at;
+}
+
+void SealedLeaves::flush()
+{
+    if (mSpool < 0) return;
+    for (std::vector<Pending>& grids : mPending)
+        for (Pending& p : grids) {
+            writeSpool(p);
+            p = Pending{};
+        }
+    mFlushed.store(true);
+}
+
+void SealedLeaves::appendBytes(std::span<const LeafRecord* const> records, std::string& out) const
+{
+    if (mSpool < 0) {
+        for (const LeafRecord* r : records) out += r->bytes;
+        return;
+    }
+    if (!mFlushed.load(std::memory_order_relaxed)) throw std::logic_error("SealedLeaves: spooled records read before flush()");
+    for (std::size_t i = 0; i < records.size();) {
+        const std::uint64_t at = records[i]->spoolAt;
+        std::uint64_t end = at + records[i]->length;
+        std::size_t j = i + 1;
+        for (; j < records.size() && records[j]->spoolAt == end; ++j) end += records[j]->length;
+        readSpool(at, std::size_t(end - at), out);
+        i = j;
     }
 }
 
@@ -447,6 +511,13 @@ void SealedLeaves::begin(const std::vector<std::string>& grids)
         mGrids.push_back(std::make_unique<Grid>());
         mGrids.back()->name = name;
     }
+    if (mSpool < 0) return;
+    // About 4 MiB per thread whatever the grid count (a 24-frame loop seals ~200 grids), at least
+    // a few leaves' records per write.
+    mPendingBytes = std::clamp((std::size_t(4) << 20) / std::max<std::size_t>(1, grids.size()), std::size_t(16) << 10,
+                               std::size_t(1) << 20);
+    mPending = tbb::enumerable_thread_specific<std::vector<Pending>>(grids.size());
+    mFlushed.store(true);
 }
 
 template<typename LeafT>
@@ -467,18 +538,9 @@ std::uint32_t SealedLeaves::sealLeaf(int grid, const LeafT& leaf)
     std::tie(r.kind, r.size) = appendRecord(os, leaf, c, background, mHalf);
     if (!os) throw lic::Error("could not compress a leaf of grid '" + mGrids.at(std::size_t(grid))->name + "'");
     if (mSpool >= 0) {
-        // Written where a fetch_add reserves room: any thread, no lock.
         const std::string_view bytes = os.view();
         r.length = std::uint32_t(bytes.size());
-        r.spoolAt = mSpoolEnd.fetch_add(bytes.size());
-        for (std::size_t done = 0; done < bytes.size();) {
-            const ssize_t n = ::pwrite(mSpool, bytes.data() + done, bytes.size() - done, off_t(r.spoolAt + done));
-            if (n < 0 && errno == EINTR) continue;
-            if (n <= 0)
-                throw lic::Error("cannot spool the compressed leaves of a loop to " + mSpoolDir + " ("
-                                 + (n < 0 ? std::strerror(errno) : "nothing written") + "; disk full?)");
-            done += std::size_t(n);
-        }
+        r.spoolAt = spool(grid, bytes);
     } else {
         r.bytes = os.view();
     }

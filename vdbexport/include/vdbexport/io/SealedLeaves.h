@@ -10,10 +10,12 @@
 #include <openvdb/openvdb.h>
 
 #include <tbb/concurrent_vector.h>
+#include <tbb/enumerable_thread_specific.h>
 
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -61,10 +63,17 @@ public:
     std::uint32_t seal(int grid, const openvdb::FloatTree::LeafNodeType& leaf) override;
     std::uint32_t seal(int grid, const openvdb::Vec3STree::LeafNodeType& leaf) override;
 
+    /// Put every spooled record's bytes in the spool file: after the last seal(), before the first
+    /// appendBytes() (each thread gathers a grid's records in a small buffer and writes it when
+    /// full, so a loop spools with one system call per buffer instead of one per leaf).
+    /// @throw lic::Error if the spool cannot be written (disk full).
+    void flush();
+
     bool half() const { return mHalf; }
-    /// Append record `r`'s bytes to `out` (read back from the spool if spooled).
-    /// @throw lic::Error if the spool cannot be read.
-    void appendBytes(const LeafRecord& r, std::string& out) const;
+    /// Append the records' bytes to `out`, in order (read back from the spool if spooled; records
+    /// that lie one after another there are read with one system call).
+    /// @throw lic::Error if the spool cannot be read; std::logic_error before flush().
+    void appendBytes(std::span<const LeafRecord* const> records, std::string& out) const;
     /// The records of grid `name`, or null if none were sealed for it.
     const Grid* find(const std::string& name) const;
     /// The grids begin() named, in its order.
@@ -73,12 +82,26 @@ public:
 private:
     template<typename LeafT>
     std::uint32_t sealLeaf(int grid, const LeafT& leaf);
+    /// A thread's records of one grid waiting for the spool, at [base, base + capacity) there.
+    struct Pending
+    {
+        std::string bytes;
+        std::uint64_t base = 0;
+        std::size_t capacity = 0;
+    };
+    /// Where the record `bytes` goes in the spool (buffered in the thread's Pending of `grid`).
+    std::uint64_t spool(int grid, std::string_view bytes);
+    void writeSpool(const Pending& p) const;
+    void readSpool(std::uint64_t at, std::size_t length, std::string& out) const;
 
     bool mHalf;
     std::vector<std::unique_ptr<Grid>> mGrids;
     int mSpool = -1;                       ///< the spool file, or −1
     std::string mSpoolDir;                 ///< for messages
-    std::atomic<std::uint64_t> mSpoolEnd{0}; ///< bytes spooled (records are written at fetch_add)
+    std::atomic<std::uint64_t> mSpoolEnd{0}; ///< bytes reserved in the spool (fetch_add)
+    std::size_t mPendingBytes = 0;           ///< each Pending's capacity (from the grid count)
+    tbb::enumerable_thread_specific<std::vector<Pending>> mPending; ///< per thread, per grid
+    std::atomic<bool> mFlushed{true};        ///< no record waits in a Pending
 };
 
 } // namespace vdbexport::detail
