@@ -597,13 +597,13 @@ TEST_F(VdbIOTest, SealedLeavesAreWrittenAsTheWholeLeavesWouldBe)
     velocity->setGridClass(openvdb::GRID_UNKNOWN);
     const openvdb::GridCPtrVec whole{density, velocity};
     vdbexport::detail::SealedLeaves sealer(/*half=*/true);
-    sealer.begin({"density", "velocity"});
+    sealer.begin({"density", "velocity"}, 1);
     auto sealGrid = [&](const auto& grid, int index, bool keepOneWhole) {
         using GridT = typename std::decay_t<decltype(*grid)>;
         auto out = openvdb::gridPtrCast<GridT>(grid->copyGridWithNewTree());
         bool first = true;
         for (auto it = grid->constTree().cbeginLeaf(); it; ++it) {
-            const std::uint32_t tag = sealer.seal(index, *it);
+            const std::uint32_t tag = sealer.seal(index, *it, 0);
             if (keepOneWhole && std::exchange(first, false)) out->tree().addLeaf(new typename GridT::TreeType::LeafNodeType(*it));
             else out->tree().addLeaf(lic::topologyOnly(*it, tag).release());
         }
@@ -649,7 +649,7 @@ TEST_F(VdbIOTest, SpooledSealedLeavesAreWrittenAsTheWholeLeavesWouldBe)
     auto density = noisyGrid<openvdb::FloatGrid>("density", 2000, false, 21);
     auto halo = noisyGrid<openvdb::FloatGrid>("halo", 2000, false, 22);
     vdbexport::detail::SealedLeaves sealer(/*half=*/false, mDir.string());
-    sealer.begin({"density", "halo"});
+    sealer.begin({"density", "halo"}, 2);
     std::vector<const openvdb::FloatTree::LeafNodeType*> a, b;
     for (auto it = density->constTree().cbeginLeaf(); it; ++it) a.push_back(it.getLeaf());
     for (auto it = halo->constTree().cbeginLeaf(); it; ++it) b.push_back(it.getLeaf());
@@ -657,8 +657,8 @@ TEST_F(VdbIOTest, SpooledSealedLeavesAreWrittenAsTheWholeLeavesWouldBe)
     std::vector<std::uint32_t> tagA(a.size()), tagB(b.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, a.size(), 8), [&](const auto& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
-            tagA[i] = sealer.seal(0, *a[i]);
-            tagB[i] = sealer.seal(1, *b[i]);
+            tagA[i] = sealer.seal(0, *a[i], int(i % 2));
+            tagB[i] = sealer.seal(1, *b[i], int(i % 2));
         }
     });
     auto topology = [](const openvdb::FloatGrid& grid, const auto& leaves, const std::vector<std::uint32_t>& tags) {

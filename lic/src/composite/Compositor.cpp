@@ -166,7 +166,7 @@ bool Compositor::sealLeaves(LeafSealer* sealer)
         for (int v = 0; v < loopValues(); ++v) names.push_back(loopValueName(v));
     if (!still) forEachShared([&](const OutputGridRow& row, const auto&) { names.push_back(std::string(row.name)); });
     if (names.empty()) return false;
-    sealer->begin(names);
+    sealer->begin(names, comets ? mSettings.frames : 1);
     mSealer = sealer;
     mSealFrames = comets;
     return true;
@@ -354,7 +354,7 @@ void Compositor::sealLoopBlock(std::size_t b, const LoopStage& stage, LoopBlock&
         const float* row = stage.values.data() + r * nc;
         for (std::size_t j = 0; j < nc; ++j)
             if (stage.shows[j]) data[stage.off[j]] = row[j];
-        lb.tags[r] = mSealer->seal(int(r % per), leaf);
+        lb.tags[r] = mSealer->seal(int(r % per), leaf, int(r / per)); // r = frame · per + value
     }
 }
 

@@ -458,13 +458,14 @@ void SealedLeaves::readSpool(std::uint64_t at, std::size_t length, std::string& 
     }
 }
 
-std::uint64_t SealedLeaves::spool(int grid, std::string_view bytes)
+std::uint64_t SealedLeaves::spool(int grid, int stream, std::string_view bytes)
 {
     // Written where a fetch_add reserved room: any thread, no lock. A thread fills a Pending per
-    // grid, so a grid's leaves sealed one after another by a thread lie one after another in the
-    // spool and are read back together.
+    // grid and stream (a loop's frame), so the leaves of one file's grid sealed one after another
+    // by a thread lie one after another in the spool and are read back together.
+    if (stream < 0 || stream >= mStreams) throw std::logic_error("SealedLeaves: stream out of range");
     if (mFlushed.load(std::memory_order_relaxed)) mFlushed.store(false, std::memory_order_relaxed);
-    Pending& p = mPending.local()[std::size_t(grid)];
+    Pending& p = mPending.local()[std::size_t(stream) * mGrids.size() + std::size_t(grid)];
     if (p.bytes.size() + bytes.size() > p.capacity) {
         writeSpool(p);
         p.bytes.clear();
@@ -504,24 +505,27 @@ void SealedLeaves::appendBytes(std::span<const LeafRecord* const> records, std::
     }
 }
 
-void SealedLeaves::begin(const std::vector<std::string>& grids)
+void SealedLeaves::begin(const std::vector<std::string>& grids, int streams)
 {
     mGrids.clear();
     for (const std::string& name : grids) {
         mGrids.push_back(std::make_unique<Grid>());
         mGrids.back()->name = name;
     }
+    if (streams < 1) throw std::logic_error("SealedLeaves: no streams");
+    mStreams = streams;
     if (mSpool < 0) return;
-    // About 4 MiB per thread whatever the grid count (a 24-frame loop seals ~200 grids), at least
-    // a few leaves' records per write.
-    mPendingBytes = std::clamp((std::size_t(4) << 20) / std::max<std::size_t>(1, grids.size()), std::size_t(16) << 10,
+    // About 4 MiB per thread whatever the count of grids and frames (a 24-frame loop of three
+    // widths fills ~200 files' grids), at least a few leaves' records per write.
+    const std::size_t buffers = grids.size() * std::size_t(streams);
+    mPendingBytes = std::clamp((std::size_t(4) << 20) / std::max<std::size_t>(1, buffers), std::size_t(16) << 10,
                                std::size_t(1) << 20);
-    mPending = tbb::enumerable_thread_specific<std::vector<Pending>>(grids.size());
+    mPending = tbb::enumerable_thread_specific<std::vector<Pending>>(buffers);
     mFlushed.store(true);
 }
 
 template<typename LeafT>
-std::uint32_t SealedLeaves::sealLeaf(int grid, const LeafT& leaf)
+std::uint32_t SealedLeaves::sealLeaf(int grid, const LeafT& leaf, int stream)
 {
     using ValueT = typename LeafT::ValueType;
     static const ValueT background = openvdb::zeroVal<ValueT>();
@@ -540,7 +544,7 @@ std::uint32_t SealedLeaves::sealLeaf(int grid, const LeafT& leaf)
     if (mSpool >= 0) {
         const std::string_view bytes = os.view();
         r.length = std::uint32_t(bytes.size());
-        r.spoolAt = spool(grid, bytes);
+        r.spoolAt = spool(grid, stream, bytes);
     } else {
         r.bytes = os.view();
     }
@@ -551,8 +555,14 @@ std::uint32_t SealedLeaves::sealLeaf(int grid, const LeafT& leaf)
     return std::uint32_t(index);
 }
 
-std::uint32_t SealedLeaves::seal(int grid, const openvdb::FloatTree::LeafNodeType& leaf) { return sealLeaf(grid, leaf); }
-std::uint32_t SealedLeaves::seal(int grid, const openvdb::Vec3STree::LeafNodeType& leaf) { return sealLeaf(grid, leaf); }
+std::uint32_t SealedLeaves::seal(int grid, const openvdb::FloatTree::LeafNodeType& leaf, int stream)
+{
+    return sealLeaf(grid, leaf, stream);
+}
+std::uint32_t SealedLeaves::seal(int grid, const openvdb::Vec3STree::LeafNodeType& leaf, int stream)
+{
+    return sealLeaf(grid, leaf, stream);
+}
 
 const SealedLeaves::Grid* SealedLeaves::find(const std::string& name) const
 {

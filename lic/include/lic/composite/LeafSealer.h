@@ -23,13 +23,15 @@ class LeafSealer
 public:
     virtual ~LeafSealer() = default;
     /// The grids whose leaves will be sealed, by name, before the first seal(); `grid` in seal()
-    /// indexes this list.
-    virtual void begin(const std::vector<std::string>& grids) = 0;
+    /// indexes this list. `streams`: how many files the leaves of a grid go to (a comet loop's
+    /// frames; 1 otherwise).
+    virtual void begin(const std::vector<std::string>& grids, int streams) = 0;
     /// Keep what the leaf's values will be needed for. Returns the number the leaf's topology-only
     /// copy carries (LeafNode::transientData) to find it again. Called from several threads at
-    /// once, for different leaves.
-    virtual std::uint32_t seal(int grid, const openvdb::FloatTree::LeafNodeType& leaf) = 0;
-    virtual std::uint32_t seal(int grid, const openvdb::Vec3STree::LeafNodeType& leaf) = 0;
+    /// once, for different leaves. `stream` (0 … streams − 1): the file the leaf goes to, a hint
+    /// for keeping the leaves written together close together.
+    virtual std::uint32_t seal(int grid, const openvdb::FloatTree::LeafNodeType& leaf, int stream) = 0;
+    virtual std::uint32_t seal(int grid, const openvdb::Vec3STree::LeafNodeType& leaf, int stream) = 0;
 };
 
 /// A topology-only leaf: `origin` and active mask `mask`, no values (OpenVDB's partial leaf: its

@@ -46,7 +46,7 @@ public:
     /// Hand block b's leaf (if any) to `sealer` as grid `grid`, and keep only its topology.
     void seal(std::size_t b, LeafSealer& sealer, int grid)
     {
-        if (const LeafT* l = at(b); l && !l->isEmpty()) mLeaves[b] = topologyOnly(*l, sealer.seal(grid, *l));
+        if (const LeafT* l = at(b); l && !l->isEmpty()) mLeaves[b] = topologyOnly(*l, sealer.seal(grid, *l, 0));
     }
 
     /// Move every non-empty leaf into a new grid named `name` with the output transform (fog

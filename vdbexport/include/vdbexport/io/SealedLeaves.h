@@ -59,9 +59,9 @@ public:
     template<typename T>
     static std::uint32_t compression();
 
-    void begin(const std::vector<std::string>& grids) override;
-    std::uint32_t seal(int grid, const openvdb::FloatTree::LeafNodeType& leaf) override;
-    std::uint32_t seal(int grid, const openvdb::Vec3STree::LeafNodeType& leaf) override;
+    void begin(const std::vector<std::string>& grids, int streams) override;
+    std::uint32_t seal(int grid, const openvdb::FloatTree::LeafNodeType& leaf, int stream) override;
+    std::uint32_t seal(int grid, const openvdb::Vec3STree::LeafNodeType& leaf, int stream) override;
 
     /// Put every spooled record's bytes in the spool file: after the last seal(), before the first
     /// appendBytes() (each thread gathers a grid's records in a small buffer and writes it when
@@ -81,7 +81,7 @@ public:
 
 private:
     template<typename LeafT>
-    std::uint32_t sealLeaf(int grid, const LeafT& leaf);
+    std::uint32_t sealLeaf(int grid, const LeafT& leaf, int stream);
     /// A thread's records of one grid waiting for the spool, at [base, base + capacity) there.
     struct Pending
     {
@@ -89,8 +89,9 @@ private:
         std::uint64_t base = 0;
         std::size_t capacity = 0;
     };
-    /// Where the record `bytes` goes in the spool (buffered in the thread's Pending of `grid`).
-    std::uint64_t spool(int grid, std::string_view bytes);
+    /// Where the record `bytes` goes in the spool (buffered in the thread's Pending of `grid` and
+    /// `stream`).
+    std::uint64_t spool(int grid, int stream, std::string_view bytes);
     void writeSpool(const Pending& p) const;
     void readSpool(std::uint64_t at, std::size_t length, std::string& out) const;
 
@@ -100,7 +101,8 @@ private:
     std::string mSpoolDir;                 ///< for messages
     std::atomic<std::uint64_t> mSpoolEnd{0}; ///< bytes reserved in the spool (fetch_add)
     std::size_t mPendingBytes = 0;           ///< each Pending's capacity (from the grid count)
-    tbb::enumerable_thread_specific<std::vector<Pending>> mPending; ///< per thread, per grid
+    int mStreams = 1;
+    tbb::enumerable_thread_specific<std::vector<Pending>> mPending; ///< per thread, [stream][grid]
     std::atomic<bool> mFlushed{true};        ///< no record waits in a Pending
 };
 
