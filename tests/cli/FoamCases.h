@@ -33,6 +33,14 @@ inline bool allowNoOpenFoam()
     return allow && std::string(allow) == "1";
 }
 
+/// OpenFOAM is missing: skip with `why` (anything `<<` takes) if LICVDB_ALLOW_NO_OPENFOAM=1, else
+/// fail with it and the hint. Returns from the test.
+#define FOAM_TEST_NOT_RUN(why)                                                                    \
+    do {                                                                                          \
+        if (::foam_test::allowNoOpenFoam()) GTEST_SKIP() << why;                                  \
+        FAIL() << why << ::foam_test::kAllowNoOpenFoam;                                           \
+    } while (0)
+
 /// make_cases.sh's exit status (77: OpenFOAM not installed) and output.
 struct Cases
 {

@@ -24,8 +24,6 @@
 
 namespace fs = std::filesystem;
 
-using foam_test::allowNoOpenFoam;
-using foam_test::kAllowNoOpenFoam;
 using namespace vdbexport::mesh_module;
 
 namespace {
@@ -150,11 +148,7 @@ TEST_F(FoamDict, RealSetConstraintTypesWhereInstalled)
     const auto dirs = foamEtcDirs();
     bool found = false;
     for (const auto& d : dirs) found = found || fs::exists(d / "caseDicts" / "setConstraintTypes");
-    if (!found) {
-        const char* why = "NOT RUN: no OpenFOAM etc/caseDicts/setConstraintTypes (OpenFOAM not installed)";
-        if (allowNoOpenFoam()) GTEST_SKIP() << why;
-        FAIL() << why << kAllowNoOpenFoam;
-    }
+    if (!found) FOAM_TEST_NOT_RUN("NOT RUN: no OpenFOAM etc/caseDicts/setConstraintTypes (OpenFOAM not installed)");
     FoamDictContext real = ctx();
     real.etcDirs = dirs;
     EXPECT_EQ(entries(kPorousU, real), entries(kPorousU, ctx())) << "synthesised = real setConstraintTypes";
@@ -543,12 +537,9 @@ TEST_F(FoamDict, TutorialsAgainstFoamDictionary)
 {
     const std::string exe = foamDictionaryExe();
     const fs::path examples = "/usr/share/doc/openfoam-examples/examples";
-    if (exe.empty() || !fs::is_directory(examples)) {
-        const std::string why = "NOT RUN: OpenFOAM's foamDictionary or its tutorials are not installed "
-                                "(apt-get install openfoam openfoam-examples): no reference to compare with";
-        if (allowNoOpenFoam()) GTEST_SKIP() << why;
-        FAIL() << why << kAllowNoOpenFoam;
-    }
+    if (exe.empty() || !fs::is_directory(examples))
+        FOAM_TEST_NOT_RUN("NOT RUN: OpenFOAM's foamDictionary or its tutorials are not installed "
+                          "(apt-get install openfoam openfoam-examples): no reference to compare with");
     const fs::path etc = "/usr/share/openfoam/etc";
     ::setenv("WM_PROJECT_DIR", etc.parent_path().c_str(), 0);
     // Every tutorial 0*/U that uses a directive or a scoped/embedded variable.
@@ -614,10 +605,7 @@ TEST_F(FoamDict, MadeCasesWithTheirPatches)
     // this fails with "NOT RUN", as test_openfoam does, unless LICVDB_ALLOW_NO_OPENFOAM=1.
     const fs::path cache = foam_test::foamCache();
     const foam_test::Cases& made = foam_test::cases();
-    if (made.code == 77) {
-        if (allowNoOpenFoam()) GTEST_SKIP() << made.log;
-        FAIL() << made.log << kAllowNoOpenFoam;
-    }
+    if (made.code == 77) FOAM_TEST_NOT_RUN(foam_test::kNotRun << "\n" << made.log);
     ASSERT_EQ(made.code, 0) << "tests/openfoam/make_cases.sh " << cache << " failed:\n" << made.log;
     for (const char* name : {"pipeCyclic", "porousBlockage"}) {
         SCOPED_TRACE(name);
