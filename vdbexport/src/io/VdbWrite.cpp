@@ -359,7 +359,7 @@ private:
         for (std::size_t i = 0; i < n && os; ++i) {
             const LeafRecord& r = leaves.sealed(i, sealed);
             batch.push_back(&r);
-            batchBytes += std::max<std::size_t>(r.length, r.bytes.size()); // spooled: length; held: bytes
+            batchBytes += r.length;
             if (batchBytes >= kRunBytes || i + 1 == n) {
                 records.appendBytes(batch, run);
                 os.write(run.data(), std::streamsize(run.size()));
@@ -541,13 +541,10 @@ std::uint32_t SealedLeaves::sealLeaf(int grid, const LeafT& leaf, int stream)
     r.origin = leaf.origin();
     std::tie(r.kind, r.size) = appendRecord(os, leaf, c, background, mHalf);
     if (!os) throw lic::Error("could not compress a leaf of grid '" + mGrids.at(std::size_t(grid))->name + "'");
-    if (mSpool >= 0) {
-        const std::string_view bytes = os.view();
-        r.length = std::uint32_t(bytes.size());
-        r.spoolAt = spool(grid, stream, bytes);
-    } else {
-        r.bytes = os.view();
-    }
+    const std::string_view bytes = os.view();
+    r.length = std::uint32_t(bytes.size());
+    if (mSpool >= 0) r.spoolAt = spool(grid, stream, bytes);
+    else r.bytes = bytes;
     auto& records = mGrids.at(std::size_t(grid))->records;
     const auto at = records.push_back(std::move(r));
     const auto index = std::size_t(at - records.begin());

@@ -22,8 +22,8 @@
 namespace vdbexport::detail {
 
 /// One leaf's record (LeafNode::writeBuffers' bytes) and what the grid's delayed-load table holds
-/// for it: the mask-compression kind and the compressed block's size. Spooled records keep their
-/// bytes in the spool file instead (`spoolAt`, `length`).
+/// for it: the mask-compression kind and the compressed block's size. `length`: the record's bytes;
+/// spooled records keep them in the spool file at `spoolAt` instead of in `bytes`.
 struct LeafRecord
 {
     openvdb::Coord origin;
